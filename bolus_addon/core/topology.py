@@ -1,0 +1,353 @@
+"""Mesh topology and per-element geometry: Algorithm 3-1 of the seed, vectorised.
+
+`MeshTopology(V, F)` prepares, once, everything later steps ask of a triangle mesh:
+edges with their faces, boundary and non-manifold elements, one-ring vertices and
+faces (as sparse incidence matrices), face areas, centroids, inner angles, face
+normals (eq. 3-1) and area-weighted vertex normals (eq. 3-2).  Quantities are
+computed lazily and cached, so a caller that only needs angle sums pays for nothing
+else.  Polygons with more than three corners are fan-triangulated by
+`triangulate_polygons`, which also returns the triangle -> polygon map so results can
+be taken back to the original faces.
+"""
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from .errors import BolusError
+
+__all__ = [
+    "MeshTopology",
+    "as_mesh_arrays",
+    "triangulate_polygons",
+    "face_areas",
+    "face_normals",
+    "corner_angles",
+]
+
+
+def as_mesh_arrays(V, F) -> tuple[np.ndarray, np.ndarray]:
+    """Validate and convert ``V`` (n,3) and ``F`` (m,3) to float64 / int64 arrays.
+
+    Raises `BolusError` for wrong shapes, non-finite coordinates, out-of-range indices
+    or triangles that repeat a vertex.
+    """
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F)
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise BolusError(f"vertices must be an (n, 3) array, got shape {V.shape}")
+    if F.ndim != 2 or F.shape[1] != 3:
+        raise BolusError(f"triangles must be an (m, 3) array, got shape {F.shape}")
+    if F.size and not np.issubdtype(F.dtype, np.integer):
+        raise BolusError("triangle indices must be integers")
+    F = F.astype(np.int64, copy=False)
+    if not np.all(np.isfinite(V)):
+        raise BolusError("the mesh has vertices with non-finite (NaN or infinite) coordinates")
+    if F.size and (F.min() < 0 or F.max() >= len(V)):
+        raise BolusError("a triangle refers to a vertex index outside the vertex array")
+    if F.size and np.any((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])):
+        raise BolusError("a triangle repeats one of its vertices (degenerate face)")
+    return V, F
+
+
+def triangulate_polygons(corner_verts, face_sizes) -> tuple[np.ndarray, np.ndarray]:
+    """Fan-triangulate polygons given Blender-style as a flat corner list.
+
+    corner_verts (c,) int: vertex index of every corner, polygon after polygon.
+    face_sizes (p,) int: number of corners of each polygon (>= 3).
+    Returns ``F`` (m,3) int64 and ``tri_face`` (m,) int64, the polygon of each triangle.
+    A polygon with k corners gives k-2 triangles (c0, ci, ci+1), i = 1..k-2, which is
+    exact for convex polygons (the Blender layer uses Blender's own triangulation,
+    which also handles concave n-gons).
+    """
+    corner_verts = np.asarray(corner_verts, dtype=np.int64)
+    face_sizes = np.asarray(face_sizes, dtype=np.int64)
+    if np.any(face_sizes < 3):
+        raise BolusError("every polygon needs at least three corners")
+    if face_sizes.sum() != len(corner_verts):
+        raise BolusError("face sizes do not add up to the number of corners")
+    starts = np.concatenate([[0], np.cumsum(face_sizes)[:-1]])
+    ntri = face_sizes - 2
+    tri_face = np.repeat(np.arange(len(face_sizes)), ntri)
+    # index of the triangle inside its polygon: 0..k-3
+    local = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri)
+    base = starts[tri_face]
+    F = np.stack(
+        [corner_verts[base], corner_verts[base + local + 1], corner_verts[base + local + 2]],
+        axis=1,
+    )
+    return F, tri_face
+
+
+def _face_cross(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    return np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+
+
+def face_areas(V, F) -> np.ndarray:
+    """Triangle areas (m,)."""
+    return 0.5 * np.linalg.norm(_face_cross(V, F), axis=1)
+
+
+def face_normals(V, F) -> np.ndarray:
+    """Unit face normals (m,3), eq. 3-1 (right-hand rule on the corner order).
+
+    A zero-area triangle gets the zero vector.
+    """
+    c = _face_cross(V, F)
+    n = np.linalg.norm(c, axis=1, keepdims=True)
+    return np.divide(c, n, out=np.zeros_like(c), where=n > 0)
+
+
+def corner_angles(V, F) -> np.ndarray:
+    """Inner angles (m,3): entry [f, k] is the angle of triangle f at corner F[f, k].
+
+    Uses atan2(|a x b|, a . b), which stays accurate for needle triangles.
+    """
+    P = V[F]  # (m,3,3)
+    a = np.roll(P, -1, axis=1) - P  # to next corner
+    b = np.roll(P, -2, axis=1) - P  # to previous corner
+    cr = np.linalg.norm(np.cross(a, b), axis=2)
+    dt = np.einsum("mkc,mkc->mk", a, b)
+    return np.arctan2(cr, dt)
+
+
+class MeshTopology:
+    """Topological data structure of a triangle mesh (Algorithm 3-1).
+
+    Attributes (all numpy arrays, computed on first access):
+      edges (e,2)            sorted vertex pairs, unique
+      face_edges (m,3)       edge index of side k (F[f,k] -> F[f,k+1])
+      edge_face_count (e,)   number of faces on each edge (1 boundary, 2 manifold, >2 non-manifold)
+      edge_faces (e,2)       the first two faces of each edge, -1 where missing
+      edge_lengths (e,)
+      boundary_edges (e,) bool, nonmanifold_edges (e,) bool
+      boundary_vertices (n,) bool, vertex_fan_count (n,), interior_vertices (n,) bool
+      used_vertices (n,) bool  vertices referenced by at least one triangle
+      vertex_adjacency (n,n) csr  one-ring vertices (N^i), 1 where an edge joins them
+      vertex_faces (n,m) csr      one-ring triangles (F^i)
+      face_adjacency (m,m) csr    faces sharing an edge (dual graph)
+      areas (m,), centroids (m,3), angles (m,3), face_normals (m,3) (eq. 3-1),
+      vertex_normals (n,3) (eq. 3-2), angle_sums (n,) (theta of eq. 4-1)
+    """
+
+    def __init__(self, V, F):
+        self.V, self.F = as_mesh_arrays(V, F)
+        self.n = len(self.V)
+        self.m = len(self.F)
+
+    # ------------------------------------------------------------------ edges
+    @cached_property
+    def _halfedges(self) -> tuple[np.ndarray, np.ndarray]:
+        F = self.F
+        he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)  # (3m,2)
+        key = np.sort(he, axis=1)
+        edges, inverse = np.unique(key, axis=0, return_inverse=True)
+        return edges, inverse.reshape(-1)
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        return self._halfedges[0]
+
+    @cached_property
+    def face_edges(self) -> np.ndarray:
+        return self._halfedges[1].reshape(-1, 3)
+
+    @cached_property
+    def edge_face_count(self) -> np.ndarray:
+        return np.bincount(self._halfedges[1], minlength=len(self.edges))
+
+    @cached_property
+    def _edge_face_sorted(self) -> tuple[np.ndarray, np.ndarray]:
+        """Half-edges sorted by edge: (edge id, face id) in that order."""
+        eid = self._halfedges[1]
+        fid = np.repeat(np.arange(self.m), 3)
+        order = np.argsort(eid, kind="stable")
+        return eid[order], fid[order]
+
+    @cached_property
+    def edge_faces(self) -> np.ndarray:
+        eid, fid = self._edge_face_sorted
+        out = np.full((len(self.edges), 2), -1, dtype=np.int64)
+        first = np.ones(len(eid), dtype=bool)
+        first[1:] = eid[1:] != eid[:-1]
+        out[eid[first], 0] = fid[first]
+        second = np.zeros(len(eid), dtype=bool)
+        second[1:] = (eid[1:] == eid[:-1]) & first[:-1]
+        out[eid[second], 1] = fid[second]
+        return out
+
+    @cached_property
+    def edge_lengths(self) -> np.ndarray:
+        E = self.edges
+        return np.linalg.norm(self.V[E[:, 0]] - self.V[E[:, 1]], axis=1)
+
+    @cached_property
+    def boundary_edges(self) -> np.ndarray:
+        return self.edge_face_count == 1
+
+    @cached_property
+    def nonmanifold_edges(self) -> np.ndarray:
+        return self.edge_face_count > 2
+
+    # --------------------------------------------------------------- vertices
+    @cached_property
+    def used_vertices(self) -> np.ndarray:
+        used = np.zeros(self.n, dtype=bool)
+        used[self.F.ravel()] = True
+        return used
+
+    @cached_property
+    def boundary_vertices(self) -> np.ndarray:
+        b = np.zeros(self.n, dtype=bool)
+        b[self.edges[self.boundary_edges].ravel()] = True
+        return b
+
+    @cached_property
+    def vertex_fan_count(self) -> np.ndarray:
+        """Number of triangle fans around each vertex (1 on a manifold vertex).
+
+        Corners of the same vertex are joined across every edge they share; a vertex
+        whose corners fall into several groups is a non-manifold ("bow-tie") vertex.
+        """
+        m = self.m
+        eid, fid = self._edge_face_sorted
+        # consecutive half-edges of one edge: faces fa, fb share that edge
+        same = np.nonzero(eid[1:] == eid[:-1])[0]
+        fa, fb = fid[same], fid[same + 1]
+        e = eid[same]
+        rows, cols = [], []
+        for end in (0, 1):
+            v = self.edges[e, end]
+            ka = np.argmax(self.F[fa] == v[:, None], axis=1)
+            kb = np.argmax(self.F[fb] == v[:, None], axis=1)
+            rows.append(3 * fa + ka)
+            cols.append(3 * fb + kb)
+        rows = np.concatenate(rows)
+        cols = np.concatenate(cols)
+        G = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
+        _, comp = connected_components(G, directed=False)
+        corner_vertex = self.F.ravel()
+        pairs = np.unique(np.stack([corner_vertex, comp], axis=1), axis=0)
+        return np.bincount(pairs[:, 0], minlength=self.n)
+
+    @cached_property
+    def nonmanifold_vertices(self) -> np.ndarray:
+        """Vertices on a non-manifold edge or with several fans (bow-tie)."""
+        bad = self.vertex_fan_count > 1
+        bad[self.edges[self.nonmanifold_edges].ravel()] = True
+        return bad
+
+    @cached_property
+    def interior_vertices(self) -> np.ndarray:
+        """Used vertices that are neither on the boundary nor non-manifold."""
+        return self.used_vertices & ~self.boundary_vertices & ~self.nonmanifold_vertices
+
+    # ------------------------------------------------------- one-ring (sparse)
+    @cached_property
+    def vertex_adjacency(self) -> sp.csr_matrix:
+        E = self.edges
+        n = self.n
+        A = sp.coo_matrix(
+            (np.ones(2 * len(E)), (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])), shape=(n, n)
+        )
+        return A.tocsr()
+
+    @cached_property
+    def vertex_faces(self) -> sp.csr_matrix:
+        m = self.m
+        rows = self.F.ravel()
+        cols = np.repeat(np.arange(m), 3)
+        return sp.csr_matrix((np.ones(3 * m), (rows, cols)), shape=(self.n, m))
+
+    def one_ring_vertices(self, i: int) -> np.ndarray:
+        """N^i: indices of the vertices sharing an edge with vertex i."""
+        A = self.vertex_adjacency
+        return A.indices[A.indptr[i] : A.indptr[i + 1]]
+
+    def one_ring_faces(self, i: int) -> np.ndarray:
+        """F^i: indices of the triangles that contain vertex i."""
+        A = self.vertex_faces
+        return A.indices[A.indptr[i] : A.indptr[i + 1]]
+
+    @cached_property
+    def face_adjacency_pairs(self) -> np.ndarray:
+        """(k,2) pairs of faces that share an edge (consecutive faces on non-manifold edges)."""
+        eid, fid = self._edge_face_sorted
+        same = np.nonzero(eid[1:] == eid[:-1])[0]
+        return np.stack([fid[same], fid[same + 1]], axis=1)
+
+    @cached_property
+    def face_adjacency_edges(self) -> np.ndarray:
+        """(k,) edge index of each pair in `face_adjacency_pairs`."""
+        eid, _ = self._edge_face_sorted
+        same = np.nonzero(eid[1:] == eid[:-1])[0]
+        return eid[same]
+
+    @cached_property
+    def face_adjacency(self) -> sp.csr_matrix:
+        P = self.face_adjacency_pairs
+        m = self.m
+        A = sp.coo_matrix(
+            (np.ones(2 * len(P)), (np.r_[P[:, 0], P[:, 1]], np.r_[P[:, 1], P[:, 0]])), shape=(m, m)
+        )
+        return A.tocsr()
+
+    def face_components(self, mask=None) -> tuple[int, np.ndarray]:
+        """Edge-connected components of the faces.
+
+        mask: optional (m,) int labels; faces are joined only when their labels agree.
+        Returns (count, component (m,) int).
+        """
+        P = self.face_adjacency_pairs
+        if mask is not None:
+            mask = np.asarray(mask)
+            P = P[mask[P[:, 0]] == mask[P[:, 1]]]
+        G = sp.coo_matrix((np.ones(len(P)), (P[:, 0], P[:, 1])), shape=(self.m, self.m))
+        return connected_components(G, directed=False)
+
+    # ---------------------------------------------------------------- geometry
+    @cached_property
+    def areas(self) -> np.ndarray:
+        return face_areas(self.V, self.F)
+
+    @cached_property
+    def centroids(self) -> np.ndarray:
+        return self.V[self.F].mean(axis=1)
+
+    @cached_property
+    def angles(self) -> np.ndarray:
+        return corner_angles(self.V, self.F)
+
+    @cached_property
+    def face_normals(self) -> np.ndarray:
+        """Eq. 3-1."""
+        return face_normals(self.V, self.F)
+
+    @cached_property
+    def vertex_normals(self) -> np.ndarray:
+        """Eq. 3-2: sum of area(f) N(f) over the one-ring triangles, normalised (Taubin)."""
+        w = self.face_normals * self.areas[:, None]
+        N = np.zeros((self.n, 3))
+        for k in range(3):
+            np.add.at(N, self.F[:, k], w)
+        ln = np.linalg.norm(N, axis=1, keepdims=True)
+        return np.divide(N, ln, out=np.zeros_like(N), where=ln > 0)
+
+    @cached_property
+    def angle_sums(self) -> np.ndarray:
+        """theta(v) of eq. 4-1: the sum of the inner angles at each vertex (n,)."""
+        return np.bincount(self.F.ravel(), weights=self.angles.ravel(), minlength=self.n)
+
+    @cached_property
+    def mean_edge_length(self) -> float:
+        return float(self.edge_lengths.mean()) if len(self.edges) else 0.0
+
+    def degenerate_faces(self, rel_tol: float = 1e-10) -> np.ndarray:
+        """(m,) bool: triangles whose area is below rel_tol * (median edge length)^2."""
+        if self.m == 0:
+            return np.zeros(0, dtype=bool)
+        L = float(np.median(self.edge_lengths))
+        return self.areas <= rel_tol * L * L

@@ -1,0 +1,207 @@
+"""Blender mesh <-> numpy arrays, the only place that touches mesh data.
+
+`read_region` turns the active object's mesh into a `Region`: world-space vertices in
+millimetres, triangles from Blender's own triangulation (`loop_triangles`, which
+handles concave n-gons) and the maps back to the mesh's vertices and polygons.
+Writers put results back as attributes, always for the whole mesh, with a fill value
+outside the region.  Every reader copies: the core never sees Blender memory, and the
+mesh is only written when an operator has finished computing.
+"""
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from .core.errors import BolusError
+
+__all__ = ["Region", "mm_per_unit", "read_region", "object_mode", "write_attribute", "write_point_colors", "polygon_edge_labels", "edges_of_polygons", "set_seams"]
+
+
+def mm_per_unit(scene: bpy.types.Scene) -> float:
+    """Millimetres in one Blender unit (SPEC: one unit = scale_length metres)."""
+    return float(scene.unit_settings.scale_length) * 1000.0
+
+
+@dataclass
+class Region:
+    """The part of a mesh an operator works on (SPEC "The region").
+
+    V (n,3) float64 world coordinates in mm of the region's vertices;
+    F (m,3) int64 triangles indexing V;
+    vert_ids (n,) mesh vertex index of each row of V;
+    tri_poly (m,) mesh polygon index of each triangle;
+    poly_ids (p,) the mesh polygons in the region;
+    """
+
+    obj: bpy.types.Object
+    V: np.ndarray
+    F: np.ndarray
+    vert_ids: np.ndarray
+    tri_poly: np.ndarray
+    poly_ids: np.ndarray
+    mm_per_unit: float
+    selection_only: bool
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def mesh(self) -> bpy.types.Mesh:
+        return self.obj.data
+
+
+def _get(coll, attr: str, n: int, dtype, width: int = 1) -> np.ndarray:
+    out = np.empty(n * width, dtype=dtype)
+    coll.foreach_get(attr, out)
+    return out.reshape(-1, width) if width > 1 else out
+
+
+def active_mesh_object(context) -> bpy.types.Object:
+    obj = context.active_object
+    if obj is None:
+        raise BolusError("No active object: select the skin surface mesh first")
+    if obj.type != "MESH":
+        raise BolusError(f"'{obj.name}' is a {obj.type.lower()}, not a mesh: select the skin surface mesh")
+    return obj
+
+
+def read_region(context, obj: bpy.types.Object | None = None) -> Region:
+    """Read the region (SPEC: selected faces in Edit Mode, else the whole mesh)."""
+    obj = active_mesh_object(context) if obj is None else obj
+    if obj.mode == "EDIT":
+        obj.update_from_editmode()
+    me = obj.data
+    nv, npoly = len(me.vertices), len(me.polygons)
+    if npoly == 0:
+        raise BolusError(f"'{obj.name}' has no faces: the bolus tools need a surface mesh")
+    warnings: list[str] = []
+    selection_only = False
+    region_poly = np.ones(npoly, dtype=bool)
+    if obj.mode == "EDIT":
+        sel = _get(me.polygons, "select", npoly, bool)
+        if sel.any():
+            region_poly = sel
+            selection_only = True
+        else:
+            warnings.append("No faces selected in Edit Mode: using the whole mesh")
+    me.calc_loop_triangles()
+    nt = len(me.loop_triangles)
+    tri_v = _get(me.loop_triangles, "vertices", nt, np.int64, 3)
+    tri_p = _get(me.loop_triangles, "polygon_index", nt, np.int64)
+    keep = region_poly[tri_p]
+    tri_v, tri_p = tri_v[keep], tri_p[keep]
+    co = _get(me.vertices, "co", nv, np.float64, 3)
+    M = np.array(obj.matrix_world, dtype=np.float64)
+    scale = mm_per_unit(context.scene)
+    Vw = (co @ M[:3, :3].T + M[:3, 3]) * scale
+    vert_ids, inv = np.unique(tri_v.ravel(), return_inverse=True)
+    F = inv.reshape(-1, 3).astype(np.int64)
+    if not selection_only:
+        loose = nv - len(vert_ids)
+        if loose:
+            warnings.append(f"{loose} loose vertices (in no face) were ignored")
+        ne = len(me.edges)
+        if ne:
+            loop_e = _get(me.loops, "edge_index", len(me.loops), np.int64)
+            edges_in_faces = np.zeros(ne, dtype=bool)
+            edges_in_faces[loop_e] = True
+            nloose = int(ne - edges_in_faces.sum())
+            if nloose:
+                warnings.append(f"{nloose} loose edges (in no face) were ignored")
+    return Region(
+        obj=obj,
+        V=Vw[vert_ids],
+        F=F,
+        vert_ids=vert_ids,
+        tri_poly=tri_p,
+        poly_ids=np.nonzero(region_poly)[0],
+        mm_per_unit=scale,
+        selection_only=selection_only,
+        warnings=warnings,
+    )
+
+
+@contextlib.contextmanager
+def object_mode(obj: bpy.types.Object):
+    """Leave Edit Mode for the duration of a write (edit-mesh data would overwrite it)."""
+    was_edit = obj.mode == "EDIT"
+    if was_edit:
+        bpy.ops.object.mode_set(mode="OBJECT")
+    try:
+        yield
+    finally:
+        if was_edit:
+            bpy.ops.object.mode_set(mode="EDIT")
+
+
+_SIZE = {"POINT": lambda me: len(me.vertices), "FACE": lambda me: len(me.polygons), "EDGE": lambda me: len(me.edges)}
+
+
+def write_attribute(me: bpy.types.Mesh, name: str, kind: str, domain: str, values: np.ndarray) -> None:
+    """Create or replace attribute ``name`` (kind 'FLOAT' or 'INT') on ``domain``."""
+    values = np.asarray(values)
+    if len(values) != _SIZE[domain](me):
+        raise BolusError(f"internal error: {name} has {len(values)} values for the {domain} domain")
+    attr = me.attributes.get(name)
+    if attr is not None and (attr.data_type != kind or attr.domain != domain):
+        me.attributes.remove(attr)
+        attr = None
+    if attr is None:
+        attr = me.attributes.new(name=name, type=kind, domain=domain)
+    dtype = np.float32 if kind == "FLOAT" else np.int32
+    attr.data.foreach_set("value", values.astype(dtype).ravel())
+
+
+def write_point_colors(me: bpy.types.Mesh, name: str, rgba: np.ndarray) -> None:
+    """Create or replace a FLOAT_COLOR point attribute and make it the displayed one."""
+    attr = me.color_attributes.get(name)
+    if attr is not None and (attr.data_type != "FLOAT_COLOR" or attr.domain != "POINT"):
+        me.color_attributes.remove(attr)
+        attr = None
+    if attr is None:
+        attr = me.color_attributes.new(name=name, type="FLOAT_COLOR", domain="POINT")
+    attr.data.foreach_set("color", np.asarray(rgba, dtype=np.float32).ravel())
+    me.color_attributes.active_color = attr
+    idx = list(me.color_attributes).index(attr)
+    me.color_attributes.render_color_index = idx
+
+
+def _loop_edges_and_polygons(me: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """(edge index, polygon index) of every loop (corner) of the mesh."""
+    npoly = len(me.polygons)
+    loop_e = _get(me.loops, "edge_index", len(me.loops), np.int64)
+    starts = _get(me.polygons, "loop_start", npoly, np.int64)
+    totals = _get(me.polygons, "loop_total", npoly, np.int64)
+    order = np.argsort(starts, kind="stable")  # each polygon's loops are contiguous
+    return loop_e, np.repeat(order, totals[order])
+
+
+def polygon_edge_labels(me: bpy.types.Mesh, poly_labels: np.ndarray) -> np.ndarray:
+    """(e,) bool: mesh edges whose adjacent polygons carry different labels."""
+    loop_e, loop_p = _loop_edges_and_polygons(me)
+    lab = np.asarray(poly_labels, dtype=np.int64)[loop_p]
+    ne = len(me.edges)
+    lo = np.full(ne, np.iinfo(np.int64).max)
+    hi = np.full(ne, np.iinfo(np.int64).min)
+    np.minimum.at(lo, loop_e, lab)
+    np.maximum.at(hi, loop_e, lab)
+    return (hi > lo) & (hi != np.iinfo(np.int64).min)
+
+
+def edges_of_polygons(me: bpy.types.Mesh, poly_ids: np.ndarray) -> np.ndarray:
+    """(e,) bool: the edges used by the given polygons."""
+    loop_e, loop_p = _loop_edges_and_polygons(me)
+    mark = np.zeros(len(me.polygons), dtype=bool)
+    mark[poly_ids] = True
+    out = np.zeros(len(me.edges), dtype=bool)
+    out[loop_e[mark[loop_p]]] = True
+    return out
+
+
+def set_seams(me: bpy.types.Mesh, seam: np.ndarray, touched: np.ndarray) -> None:
+    """Set use_seam = seam on the edges where ``touched`` is True; keep the others."""
+    ne = len(me.edges)
+    cur = _get(me.edges, "use_seam", ne, bool)
+    new = np.where(touched, seam, cur)
+    me.edges.foreach_set("use_seam", new)

@@ -1,0 +1,215 @@
+"""Operators `bpy.ops.bolus.*` (contract: ../shared/SPEC.md).
+
+Each operator is thin: read the region (mesh_io), call the core, write the results,
+report.  Everything is computed before the mesh is touched, so an error leaves the
+mesh exactly as it was; `BolusError` becomes `self.report({'ERROR'}, ...)` and
+``{'CANCELLED'}``, and an unexpected exception is reported the same way (with the
+traceback on the console) instead of reaching the user.
+"""
+from __future__ import annotations
+
+import json
+import traceback
+
+import bpy
+import numpy as np
+from bpy.props import EnumProperty
+
+from . import mesh_io
+from .core.colormap import scalar_to_linear_rgba
+from .core.errors import BolusError
+from .core.saliency import analyse
+from .core.spectral import segment
+from .core.topology import MeshTopology
+from .properties import COLOR_BY_ITEMS, METHOD_ITEMS, eta_property, patches_property, seed_property, smoothing_property
+
+#: names fixed by SPEC.md
+ATTR_FLATTENABILITY = "bolus_flattenability"
+ATTR_SALIENCY = "bolus_saliency"
+ATTR_SALIENCY_COLOR = "bolus_saliency_color"
+ATTR_PATCH = "bolus_patch"
+#: custom properties of ours (read by the panel)
+PROP_PATCH_TABLE = "bolus_patch_table"
+PROP_SUM_VARPI = "bolus_sum_varpi"
+PROP_FLV = "bolus_flv"
+
+
+class BolusOperator:
+    """Shared poll / error handling / progress for the bolus operators."""
+
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        if obj is None:
+            cls.poll_message_set("No active object: select the skin surface mesh first")
+            return False
+        if obj.type != "MESH":
+            cls.poll_message_set(f"'{obj.name}' is not a mesh: select the skin surface mesh")
+            return False
+        return True
+
+    def run(self, context) -> set[str]:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def execute(self, context):
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+        self._wm = wm
+        try:
+            return self.run(context)
+        except BolusError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        except Exception as exc:  # never a traceback at the user
+            traceback.print_exc()
+            self.report({"ERROR"}, f"Unexpected error, nothing was changed ({type(exc).__name__}: {exc})")
+            return {"CANCELLED"}
+        finally:
+            wm.progress_end()
+
+    def progress(self, fraction: float, text: str = "") -> None:
+        self._wm.progress_update(int(100 * min(max(fraction, 0.0), 1.0)))
+
+    def warn_all(self, messages) -> None:
+        for msg in messages:
+            self.report({"WARNING"}, msg)
+
+
+def check_topology(topo: MeshTopology, allow_nonmanifold: bool) -> list[str]:
+    """Refuse degenerate faces (and non-manifold edges unless allowed); return warnings."""
+    warnings = []
+    bad = int(topo.degenerate_faces().sum())
+    if bad:
+        raise BolusError(
+            f"{bad} faces have zero area; remove them first (Mesh > Clean Up > Merge by Distance, "
+            "then Degenerate Dissolve)"
+        )
+    nm = int(topo.nonmanifold_edges.sum())
+    nmv = int((topo.vertex_fan_count > 1).sum())
+    if nm or nmv:
+        what = f"{nm} non-manifold edges" if nm else f"{nmv} non-manifold vertices"
+        if not allow_nonmanifold:
+            raise BolusError(
+                f"The region has {what}; a bolus must be a manifold surface "
+                "(find them with Select > Select All by Trait > Non Manifold)"
+            )
+        warnings.append(f"{what}: their vertices are treated like boundary vertices (flattenability 0)")
+    return warnings
+
+
+def show_attribute_colors(context) -> None:
+    """Switch visible 3D views in Solid mode to attribute colours (no-op headless)."""
+    screen = getattr(context, "screen", None)
+    if screen is None:
+        return
+    for area in screen.areas:
+        if area.type == "VIEW_3D":
+            for space in area.spaces:
+                if space.type == "VIEW_3D" and space.shading.type == "SOLID":
+                    space.shading.color_type = "VERTEX"
+
+
+class BOLUS_OT_saliency_preview(BolusOperator, bpy.types.Operator):
+    """Colour the surface by where it cannot lie flat (flattenability and saliency, eqs. 4-1..4-4)"""
+
+    bl_idname = "bolus.saliency_preview"
+    bl_label = "Flattenability Preview"
+
+    smoothing_mm: smoothing_property()
+    color_by: EnumProperty(name="Colour by", items=COLOR_BY_ITEMS, default="SALIENCY")
+
+    def run(self, context):
+        region = mesh_io.read_region(context)
+        topo = MeshTopology(region.V, region.F)
+        warnings = region.warnings + check_topology(topo, allow_nonmanifold=True)
+        self.progress(0.2)
+        res = analyse(region.V, region.F, self.smoothing_mm, topo=topo)
+        self.progress(0.8)
+        obj, me = region.obj, region.mesh
+        nv = len(me.vertices)
+        varpi = np.zeros(nv)
+        sal = np.zeros(nv)
+        varpi[region.vert_ids] = res.varpi
+        sal[region.vert_ids] = res.saliency
+        shown = sal if self.color_by == "SALIENCY" else varpi
+        colors = np.tile(np.array([0.2, 0.2, 0.2, 1.0], dtype=np.float32), (nv, 1))  # outside the region: grey
+        colors[region.vert_ids] = scalar_to_linear_rgba(shown[region.vert_ids])
+        with mesh_io.object_mode(obj):
+            mesh_io.write_attribute(me, ATTR_FLATTENABILITY, "FLOAT", "POINT", varpi)
+            mesh_io.write_attribute(me, ATTR_SALIENCY, "FLOAT", "POINT", sal)
+            mesh_io.write_point_colors(me, ATTR_SALIENCY_COLOR, colors)
+            me.update()
+        obj[PROP_SUM_VARPI] = res.sum_varpi
+        obj[PROP_FLV] = res.flv
+        show_attribute_colors(context)
+        self.warn_all(warnings)
+        where = "selected faces" if region.selection_only else "whole mesh"
+        self.report(
+            {"INFO"},
+            f"Flattenability of the {where} ({len(region.V)} vertices, smoothing {self.smoothing_mm:g} mm): "
+            f"sum varpi = {res.sum_varpi:.4f} rad, FLV = {res.flv:.4g}",
+        )
+        return {"FINISHED"}
+
+
+def format_patch_row(row: dict) -> str:
+    return (
+        f"Patch {row['patch']}: {row['vertices']} vertices, {row['edges']} edges, {row['faces']} triangles, "
+        f"{row['area_mm2'] / 100.0:.1f} cm², sum varpi {row['sum_varpi']:.4f}, FLV {row['flv']:.4g}"
+    )
+
+
+class BOLUS_OT_segment(BolusOperator, bpy.types.Operator):
+    """Split the surface into patches that flatten well (saliency-aware spectral clustering, eqs. 3-3..3-8, 4-5)"""
+
+    bl_idname = "bolus.segment"
+    bl_label = "Segment into Patches"
+
+    patches: patches_property()
+    eta: eta_property()
+    seed: seed_property()
+    smoothing_mm: smoothing_property()
+    method: EnumProperty(name="Clustering", items=METHOD_ITEMS, default="KMEANS")
+
+    def run(self, context):
+        region = mesh_io.read_region(context)
+        topo = MeshTopology(region.V, region.F)
+        warnings = region.warnings + check_topology(topo, allow_nonmanifold=False)
+        seg = segment(
+            region.V,
+            region.F,
+            patches=self.patches,
+            eta=self.eta,
+            smoothing_mm=self.smoothing_mm,
+            rng=self.seed,
+            method=self.method.lower(),
+            face_groups=region.tri_poly,
+            progress=lambda f, t: self.progress(0.9 * f, t),
+        )
+        obj, me = region.obj, region.mesh
+        npoly = len(me.polygons)
+        poly_labels = np.full(npoly, -1, dtype=np.int64)
+        poly_labels[region.tri_poly] = seg.face_labels
+        seams = mesh_io.polygon_edge_labels(me, poly_labels)
+        touched = mesh_io.edges_of_polygons(me, region.poly_ids)
+        table = [p.as_dict() for p in seg.patches]
+        with mesh_io.object_mode(obj):
+            mesh_io.write_attribute(me, ATTR_PATCH, "INT", "FACE", poly_labels)
+            mesh_io.set_seams(me, seams, touched)
+            me.update()
+        obj[PROP_PATCH_TABLE] = json.dumps({"requested": self.patches, "eta": self.eta, "seed": self.seed, "smoothing_mm": self.smoothing_mm, "patches": table})
+        if seg.patch_count != self.patches:
+            warnings.append(
+                f"{seg.patch_count} patches instead of the {self.patches} asked: clusters that fell apart "
+                "became separate patches, crumbs were merged into a neighbour"
+            )
+        self.warn_all(warnings)
+        self.report({"INFO"}, f"Segmented '{obj.name}' into {seg.patch_count} patches (attribute '{ATTR_PATCH}', seams on the borders)")
+        for row in table:
+            self.report({"INFO"}, format_patch_row(row))
+        return {"FINISHED"}
+
+
+classes = (BOLUS_OT_saliency_preview, BOLUS_OT_segment)

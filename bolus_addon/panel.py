@@ -1,0 +1,58 @@
+"""Sidebar panel (3D View > Sidebar > Bolus)."""
+from __future__ import annotations
+
+import json
+
+import bpy
+
+from .operators import PROP_FLV, PROP_PATCH_TABLE, PROP_SUM_VARPI
+
+
+class VIEW3D_PT_bolus(bpy.types.Panel):
+    bl_label = "Bolus"
+    bl_idname = "VIEW3D_PT_bolus"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Bolus"
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.scene.bolus
+        obj = context.active_object
+        unit = context.scene.unit_settings.scale_length
+        layout.label(text=f"1 unit = {unit * 1000:g} mm", icon="DRIVER_DISTANCE")
+
+        box = layout.box()
+        box.label(text="1. Where it cannot lie flat", icon="SHADING_SOLID")
+        box.prop(s, "smoothing_mm", text="Smoothing (mm)")
+        box.prop(s, "color_by")
+        op = box.operator("bolus.saliency_preview", icon="COLOR")
+        op.smoothing_mm = s.smoothing_mm
+        op.color_by = s.color_by
+        if obj is not None and PROP_SUM_VARPI in obj:
+            box.label(text=f"Σϖ = {obj[PROP_SUM_VARPI]:.3f} rad   FLV = {obj[PROP_FLV]:.3g}")
+
+        box = layout.box()
+        box.label(text="2. Patches", icon="MOD_EXPLODE")
+        col = box.column(align=True)
+        col.prop(s, "patches")
+        col.prop(s, "eta")
+        col.prop(s, "seed")
+        box.prop(s, "method")
+        op = box.operator("bolus.segment", icon="MESH_ICOSPHERE")
+        op.patches, op.eta, op.seed, op.smoothing_mm, op.method = s.patches, s.eta, s.seed, s.smoothing_mm, s.method
+        if obj is not None and PROP_PATCH_TABLE in obj:
+            try:
+                table = json.loads(obj[PROP_PATCH_TABLE])["patches"]
+            except (ValueError, KeyError, TypeError):
+                table = []
+            if table:
+                grid = box.grid_flow(row_major=True, columns=5, even_columns=True, align=True)
+                for head in ("Patch", "Verts", "Tris", "Σϖ", "FLV"):
+                    grid.label(text=head)
+                for r in table:
+                    for val in (str(r["patch"]), str(r["vertices"]), str(r["faces"]), f"{r['sum_varpi']:.2f}", f"{r['flv']:.3g}"):
+                        grid.label(text=val)
+
+
+classes = (VIEW3D_PT_bolus,)

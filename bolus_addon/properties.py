@@ -1,0 +1,59 @@
+"""`Scene.bolus`: the settings the sidebar panel passes to the operators."""
+from __future__ import annotations
+
+import bpy
+from bpy.props import EnumProperty, FloatProperty, IntProperty
+
+from .core.saliency import DEFAULT_SMOOTHING_MM
+
+COLOR_BY_ITEMS = [
+    ("SALIENCY", "Saliency", "Segmentation saliency s(v) of eq. 4-4: where the surface has too much angle (would overlap when flattened)"),
+    ("FLATTENABILITY", "Flattenability", "varpi(v) = |theta - 2pi| of eq. 4-1: any angle excess or deficit"),
+]
+METHOD_ITEMS = [
+    ("KMEANS", "K-means", "Cluster the spectral embedding with k-means"),
+    ("GMM", "Gaussian mixture", "Cluster the spectral embedding with a Gaussian mixture model"),
+]
+
+
+def smoothing_property(**kw):
+    return FloatProperty(
+        name="Smoothing",
+        description=(
+            "Analysis smoothing scale in mm: angle sums are measured on a copy smoothed at this scale, "
+            "so scanner noise does not hide the shape (0 = raw mesh; the mesh itself never moves)"
+        ),
+        default=DEFAULT_SMOOTHING_MM,
+        min=0.0,
+        soft_max=20.0,
+        precision=1,
+        **kw,
+    )
+
+
+def patches_property(**kw):
+    return IntProperty(name="Patches", description="Number of patches to segment into (spectral clusters)", default=3, min=1, max=64, soft_max=8, **kw)
+
+
+def eta_property(**kw):
+    return FloatProperty(
+        name="Eta",
+        description="Weight of the saliency term in the edge distance (eq. 4-5); 0 gives plain spectral clustering",
+        default=5.0,
+        min=0.0,
+        soft_max=20.0,
+        **kw,
+    )
+
+
+def seed_property(**kw):
+    return IntProperty(name="Seed", description="Random seed of the eigen-solver start vector and the clustering", default=0, min=0, **kw)
+
+
+class BolusSettings(bpy.types.PropertyGroup):
+    smoothing_mm: smoothing_property()
+    color_by: EnumProperty(name="Colour by", items=COLOR_BY_ITEMS, default="SALIENCY")
+    patches: patches_property()
+    eta: eta_property()
+    seed: seed_property()
+    method: EnumProperty(name="Clustering", items=METHOD_ITEMS, default="KMEANS")
