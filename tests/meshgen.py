@@ -1,0 +1,106 @@
+"""Synthetic test meshes with known geometry (numpy only)."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def grid(nx: int = 10, ny: int = 10, size: float = 100.0, jitter: float = 0.0, rng=0):
+    """Flat triangulated square in z = 0: V ((nx+1)(ny+1), 3), F (2 nx ny, 3)."""
+    xs, ys = np.meshgrid(np.linspace(0, size, nx + 1), np.linspace(0, size, ny + 1), indexing="ij")
+    V = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1)
+    if jitter:
+        g = np.random.default_rng(rng)
+        inner = (xs.ravel() > 0) & (xs.ravel() < size) & (ys.ravel() > 0) & (ys.ravel() < size)
+        V[inner, :2] += g.uniform(-jitter, jitter, (inner.sum(), 2)) * size / nx
+    idx = np.arange((nx + 1) * (ny + 1)).reshape(nx + 1, ny + 1)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return V, F
+
+
+def height_field(fn, nx=20, ny=20, size=100.0):
+    """Grid with z = fn(x, y), centred on the origin."""
+    V, F = grid(nx, ny, size)
+    V[:, :2] -= size / 2
+    V[:, 2] = fn(V[:, 0], V[:, 1])
+    return V, F
+
+
+def cylinder_piece(radius=50.0, angle=np.pi, length=100.0, na=16, nl=10):
+    """Part of a cylinder (developable): interior angle sums are exactly 2 pi."""
+    t, z = np.meshgrid(np.linspace(0, angle, na + 1), np.linspace(0, length, nl + 1), indexing="ij")
+    V = np.stack([radius * np.cos(t.ravel()), radius * np.sin(t.ravel()), z.ravel()], axis=1)
+    _, F = grid(na, nl)
+    return V, F
+
+
+def icosphere(subdivisions: int = 2, radius: float = 1.0):
+    """Closed genus-0 triangle mesh on a sphere."""
+    p = (1 + 5**0.5) / 2
+    V = np.array(
+        [[-1, p, 0], [1, p, 0], [-1, -p, 0], [1, -p, 0], [0, -1, p], [0, 1, p], [0, -1, -p], [0, 1, -p],
+         [p, 0, -1], [p, 0, 1], [-p, 0, -1], [-p, 0, 1]], dtype=float)
+    F = np.array(
+        [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4], [11, 10, 2],
+         [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5],
+         [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    for _ in range(subdivisions):
+        E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+        uniq, inv = np.unique(E, axis=0, return_inverse=True)
+        mids = len(V) + inv.reshape(3, -1).T  # (m,3): midpoints of edges 01, 12, 20
+        V = np.vstack([V, 0.5 * (V[uniq[:, 0]] + V[uniq[:, 1]])])
+        a, b, c = F.T
+        ab, bc, ca = mids.T
+        F = np.concatenate([np.stack([a, ab, ca], 1), np.stack([b, bc, ab], 1), np.stack([c, ca, bc], 1), np.stack([ab, bc, ca], 1)])
+    V = radius * V / np.linalg.norm(V, axis=1, keepdims=True)
+    return V, F
+
+
+def ring_surface(profile_rz: np.ndarray, na: int = 48, pole: bool = True):
+    """Surface of revolution from a profile of (r, z) rings, outermost first.
+
+    With ``pole`` a final vertex on the axis closes the innermost ring (a cap).
+    Returns V, F and ring (n,) the profile index of each vertex (-1 for the pole).
+    """
+    profile_rz = np.asarray(profile_rz, dtype=float)
+    nr = len(profile_rz)
+    t = np.linspace(0, 2 * np.pi, na, endpoint=False)
+    V = np.concatenate([np.stack([r * np.cos(t), r * np.sin(t), np.full(na, z)], 1) for r, z in profile_rz])
+    ring = np.repeat(np.arange(nr), na)
+    F = []
+    for i in range(nr - 1):
+        for j in range(na):
+            a, b = i * na + j, i * na + (j + 1) % na
+            c, d = (i + 1) * na + (j + 1) % na, (i + 1) * na + j
+            F += [[a, b, c], [a, c, d]]
+    if pole:
+        top = np.max(profile_rz[:, 1]) if profile_rz[-1, 0] > 0 else profile_rz[-1, 1]
+        V = np.vstack([V, [0, 0, top]])
+        ring = np.r_[ring, -1]
+        last = (nr - 1) * na
+        for j in range(na):
+            F.append([last + j, last + (j + 1) % na, len(V) - 1])
+    return V, np.asarray(F), ring
+
+
+def sheet_with_dome(R=30.0, R_out=90.0, n_sheet=12, n_dome=8, na=48):
+    """Flat annulus (R..R_out in z = 0) joined at r = R to a hemisphere cap of radius R.
+
+    Returns V, F and the geodesic distance (n,) of every vertex from the junction circle
+    (negative on the sheet, positive on the dome).
+    """
+    r_sheet = np.linspace(R_out, R, n_sheet + 1)
+    phi = np.linspace(np.pi / 2, 0, n_dome + 1)[1:-1]  # dome rings strictly between equator and pole
+    profile = np.concatenate([np.stack([r_sheet, np.zeros_like(r_sheet)], 1), np.stack([R * np.sin(phi), R * np.cos(phi)], 1)])
+    V, F, ring = ring_surface(profile, na=na, pole=True)
+    # pole sits at z = R
+    V[-1] = [0, 0, R]
+    geo = np.empty(len(V))
+    on_sheet = ring <= n_sheet
+    ring_c = np.clip(ring, 0, None)
+    geo[on_sheet] = -(r_sheet[ring_c[on_sheet]] - R)
+    dome = (~on_sheet) & (ring >= 0)
+    geo[dome] = R * (np.pi / 2 - phi[ring[dome] - n_sheet - 1])
+    geo[ring < 0] = R * np.pi / 2
+    # consistent outward orientation (normals +z on the sheet)
+    return V, F, geo

@@ -1,0 +1,107 @@
+"""Algorithm 3-1: topology and per-element geometry."""
+import numpy as np
+import pytest
+from meshgen import grid, icosphere
+
+from bolus_addon.core.errors import BolusError
+from bolus_addon.core.topology import MeshTopology, triangulate_polygons
+
+
+def test_grid_counts_and_boundary():
+    V, F = grid(4, 3)
+    t = MeshTopology(V, F)
+    # Euler: V - E + F = 1 for a disk
+    assert t.n - len(t.edges) + t.m == 1
+    assert t.boundary_edges.sum() == 2 * (4 + 3)
+    assert t.boundary_vertices.sum() == 2 * (4 + 3)
+    assert t.interior_vertices.sum() == 3 * 2
+    assert set(np.unique(t.edge_face_count)) == {1, 2}
+    assert not t.nonmanifold_vertices.any()
+    # edge_faces agree with face_edges
+    for f in range(t.m):
+        for e in t.face_edges[f]:
+            assert f in t.edge_faces[e]
+
+
+def test_one_ring_of_grid_vertex():
+    V, F = grid(2, 2)
+    t = MeshTopology(V, F)
+    centre = 4  # (1,1)
+    ring = set(t.one_ring_vertices(centre).tolist())
+    assert len(ring) == 6 and centre not in ring
+    faces = t.one_ring_faces(centre)
+    assert len(faces) == 6 and all(centre in F[f] for f in faces)
+
+
+def test_geometry_of_a_known_triangle():
+    V = np.array([[0.0, 0, 0], [3, 0, 0], [0, 4, 0]])
+    F = np.array([[0, 1, 2]])
+    t = MeshTopology(V, F)
+    assert t.areas[0] == pytest.approx(6.0)
+    np.testing.assert_allclose(t.centroids[0], [1, 4 / 3, 0])
+    np.testing.assert_allclose(t.face_normals[0], [0, 0, 1])  # eq. 3-1, counter-clockwise
+    np.testing.assert_allclose(t.angles[0], [np.pi / 2, np.arctan2(4, 3), np.arctan2(3, 4)])
+    np.testing.assert_allclose(np.sort(t.edge_lengths), [3, 4, 5])
+
+
+def test_vertex_normals_of_sphere_point_outward():
+    V, F = icosphere(3)
+    t = MeshTopology(V, F)
+    cos = np.einsum("ij,ij->i", t.vertex_normals, V / np.linalg.norm(V, axis=1, keepdims=True))
+    assert cos.min() > 0.999  # eq. 3-2
+
+
+def test_polygons_are_triangulated_and_mapped_back():
+    # a quad and a pentagon sharing an edge
+    corners = np.array([0, 1, 2, 3, 1, 4, 5, 6, 2])
+    sizes = np.array([4, 5])
+    F, tri_face = triangulate_polygons(corners, sizes)
+    assert F.shape == (2 + 3, 3)
+    np.testing.assert_array_equal(tri_face, [0, 0, 1, 1, 1])
+    assert set(F[tri_face == 0].ravel()) == {0, 1, 2, 3}
+    assert set(F[tri_face == 1].ravel()) == {1, 4, 5, 6, 2}
+
+
+def test_nonmanifold_edge_and_bowtie_vertex_detected():
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1]])
+    F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])  # three faces on edge 0-1
+    t = MeshTopology(V, F)
+    assert t.nonmanifold_edges.sum() == 1
+    assert t.nonmanifold_vertices[[0, 1]].all()
+    # bow-tie: two triangles touching at one vertex only
+    V2 = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [-1, 0, 0], [-1, -1, 0]])
+    F2 = np.array([[0, 1, 2], [0, 3, 4]])
+    t2 = MeshTopology(V2, F2)
+    assert t2.vertex_fan_count[0] == 2 and t2.vertex_fan_count[1] == 1
+    assert t2.nonmanifold_vertices[0] and not t2.interior_vertices[0]
+
+
+def test_face_components():
+    V, F = grid(2, 2)
+    V2 = np.vstack([V, V + [10, 0, 0]])
+    F2 = np.vstack([F, F + len(V)])
+    n, comp = MeshTopology(V2, F2).face_components()
+    assert n == 2 and len(set(comp[: len(F)])) == 1 and comp[0] != comp[-1]
+
+
+def test_degenerate_faces_flagged():
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]])
+    F = np.array([[0, 1, 2], [0, 1, 3]])
+    assert MeshTopology(V, F).degenerate_faces().tolist() == [True, False]
+
+
+@pytest.mark.parametrize(
+    "V,F,msg",
+    [
+        (np.zeros((3, 2)), np.array([[0, 1, 2]]), "vertices must be"),
+        (np.zeros((3, 3)), np.array([[0, 1, 3]]), "outside"),
+        (np.zeros((3, 3)), np.array([[0, 1, 1]]), "repeats"),
+        (np.full((3, 3), np.nan), np.array([[0, 1, 2]]), "non-finite"),
+        (np.zeros((3, 3)), np.array([[0.0, 1.0, 2.0]]), "integers"),
+    ],
+)
+def test_bad_arrays_raise_value_error(V, F, msg):
+    with pytest.raises(ValueError, match=msg):
+        MeshTopology(V, F)
+    with pytest.raises(BolusError):
+        MeshTopology(V, F)
