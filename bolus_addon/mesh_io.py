@@ -17,7 +17,7 @@ import numpy as np
 
 from .core.errors import BolusError
 
-__all__ = ["Region", "mm_per_unit", "read_region", "object_mode", "write_attribute", "write_point_colors", "polygon_edge_labels", "edges_of_polygons", "set_seams"]
+__all__ = ["Region", "mm_per_unit", "read_region", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "set_seams", "show_colors"]
 
 
 def mm_per_unit(scene: bpy.types.Scene) -> float:
@@ -155,16 +155,31 @@ def write_attribute(me: bpy.types.Mesh, name: str, kind: str, domain: str, value
 
 def write_point_colors(me: bpy.types.Mesh, name: str, rgba: np.ndarray) -> None:
     """Create or replace a FLOAT_COLOR point attribute and make it the displayed one."""
+    _write_colors(me, name, "POINT", rgba)
+
+
+def write_face_colors(me: bpy.types.Mesh, name: str, rgba_per_face: np.ndarray) -> None:
+    """Flat colour per polygon, stored on corners (colour attributes have no face domain)."""
+    _, loop_p = _loop_edges_and_polygons(me)
+    _write_colors(me, name, "CORNER", np.asarray(rgba_per_face)[loop_p])
+
+
+def _write_colors(me: bpy.types.Mesh, name: str, domain: str, rgba: np.ndarray) -> None:
     attr = me.color_attributes.get(name)
-    if attr is not None and (attr.data_type != "FLOAT_COLOR" or attr.domain != "POINT"):
+    if attr is not None and (attr.data_type != "FLOAT_COLOR" or attr.domain != domain):
         me.color_attributes.remove(attr)
         attr = None
     if attr is None:
-        attr = me.color_attributes.new(name=name, type="FLOAT_COLOR", domain="POINT")
+        attr = me.color_attributes.new(name=name, type="FLOAT_COLOR", domain=domain)
     attr.data.foreach_set("color", np.asarray(rgba, dtype=np.float32).ravel())
+    show_colors(me, name)
+
+
+def show_colors(me: bpy.types.Mesh, name: str) -> None:
+    """Make colour attribute ``name`` the active and the rendered one."""
+    attr = me.color_attributes[name]
     me.color_attributes.active_color = attr
-    idx = list(me.color_attributes).index(attr)
-    me.color_attributes.render_color_index = idx
+    me.color_attributes.render_color_index = list(me.color_attributes).index(attr)
 
 
 def _loop_edges_and_polygons(me: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray]:

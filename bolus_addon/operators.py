@@ -16,7 +16,7 @@ import numpy as np
 from bpy.props import EnumProperty
 
 from . import mesh_io
-from .core.colormap import scalar_to_linear_rgba
+from .core.colormap import categorical_linear_rgba, outside_linear_rgba, scalar_to_linear_rgba
 from .core.errors import BolusError
 from .core.saliency import analyse
 from .core.spectral import segment
@@ -28,6 +28,8 @@ ATTR_FLATTENABILITY = "bolus_flattenability"
 ATTR_SALIENCY = "bolus_saliency"
 ATTR_SALIENCY_COLOR = "bolus_saliency_color"
 ATTR_PATCH = "bolus_patch"
+#: ours: a display colour per patch (corner domain, so borders stay crisp)
+ATTR_PATCH_COLOR = "bolus_patch_color"
 #: custom properties of ours (read by the panel)
 PROP_PATCH_TABLE = "bolus_patch_table"
 PROP_SUM_VARPI = "bolus_sum_varpi"
@@ -118,7 +120,7 @@ class BOLUS_OT_saliency_preview(BolusOperator, bpy.types.Operator):
     bl_label = "Flattenability Preview"
 
     smoothing_mm: smoothing_property()
-    color_by: EnumProperty(name="Colour by", items=COLOR_BY_ITEMS, default="SALIENCY")
+    color_by: EnumProperty(name="Colour by", items=COLOR_BY_ITEMS, default="FLATTENABILITY")
 
     def run(self, context):
         region = mesh_io.read_region(context)
@@ -134,7 +136,7 @@ class BOLUS_OT_saliency_preview(BolusOperator, bpy.types.Operator):
         varpi[region.vert_ids] = res.varpi
         sal[region.vert_ids] = res.saliency
         shown = sal if self.color_by == "SALIENCY" else varpi
-        colors = np.tile(np.array([0.2, 0.2, 0.2, 1.0], dtype=np.float32), (nv, 1))  # outside the region: grey
+        colors = np.tile(outside_linear_rgba(), (nv, 1))
         colors[region.vert_ids] = scalar_to_linear_rgba(shown[region.vert_ids])
         with mesh_io.object_mode(obj):
             mesh_io.write_attribute(me, ATTR_FLATTENABILITY, "FLOAT", "POINT", varpi)
@@ -187,6 +189,7 @@ class BOLUS_OT_segment(BolusOperator, bpy.types.Operator):
             method=self.method.lower(),
             face_groups=region.tri_poly,
             progress=lambda f, t: self.progress(0.9 * f, t),
+            topo=topo,
         )
         obj, me = region.obj, region.mesh
         npoly = len(me.polygons)
@@ -198,6 +201,7 @@ class BOLUS_OT_segment(BolusOperator, bpy.types.Operator):
         with mesh_io.object_mode(obj):
             mesh_io.write_attribute(me, ATTR_PATCH, "INT", "FACE", poly_labels)
             mesh_io.set_seams(me, seams, touched)
+            mesh_io.write_face_colors(me, ATTR_PATCH_COLOR, categorical_linear_rgba(poly_labels))
             me.update()
         obj[PROP_PATCH_TABLE] = json.dumps({"requested": self.patches, "eta": self.eta, "seed": self.seed, "smoothing_mm": self.smoothing_mm, "patches": table})
         if seg.patch_count != self.patches:

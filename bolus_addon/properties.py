@@ -7,8 +7,8 @@ from bpy.props import EnumProperty, FloatProperty, IntProperty
 from .core.saliency import DEFAULT_SMOOTHING_MM
 
 COLOR_BY_ITEMS = [
-    ("SALIENCY", "Saliency", "Segmentation saliency s(v) of eq. 4-4: where the surface has too much angle (would overlap when flattened)"),
-    ("FLATTENABILITY", "Flattenability", "varpi(v) = |theta - 2pi| of eq. 4-1: any angle excess or deficit"),
+    ("FLATTENABILITY", "Flattenability", "varpi(v) = |theta - 2pi| of eq. 4-1: where the surface cannot lie flat (any angle excess or deficit)"),
+    ("SALIENCY", "Saliency", "Segmentation saliency s(v) of eq. 4-4: angle excess only (would overlap when flattened); drives the cuts"),
 ]
 METHOD_ITEMS = [
     ("KMEANS", "K-means", "Cluster the spectral embedding with k-means"),
@@ -52,7 +52,7 @@ def seed_property(**kw):
 
 class BolusSettings(bpy.types.PropertyGroup):
     smoothing_mm: smoothing_property()
-    color_by: EnumProperty(name="Colour by", items=COLOR_BY_ITEMS, default="SALIENCY")
+    color_by: EnumProperty(name="Colour by", items=COLOR_BY_ITEMS, default="FLATTENABILITY")
     patches: patches_property()
     eta: eta_property()
     seed: seed_property()

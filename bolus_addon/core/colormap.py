@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["VIRIDIS_SRGB", "scalar_to_linear_rgba", "srgb_to_linear", "robust_max"]
+__all__ = ["VIRIDIS_SRGB", "scalar_to_linear_rgba", "categorical_linear_rgba", "outside_linear_rgba", "srgb_to_linear", "robust_max"]
 
 #: matplotlib's viridis at t = 0, 1/16, ..., 1 (sRGB)
 VIRIDIS_SRGB = np.array(
@@ -60,5 +60,44 @@ def scalar_to_linear_rgba(values: np.ndarray, vmax: float | None = None) -> np.n
     w = (x - i)[:, None]
     srgb = VIRIDIS_SRGB[i] * (1 - w) + VIRIDIS_SRGB[i + 1] * w
     out = np.ones((len(v), 4), dtype=np.float32)
+    out[:, :3] = srgb_to_linear(srgb)
+    return out
+
+
+#: Okabe-Ito colour-blind-safe palette (sRGB), for patch labels
+OKABE_ITO_SRGB = np.array(
+    [
+        (0.902, 0.624, 0.000),
+        (0.337, 0.706, 0.914),
+        (0.000, 0.620, 0.451),
+        (0.941, 0.894, 0.259),
+        (0.000, 0.447, 0.698),
+        (0.835, 0.369, 0.000),
+        (0.800, 0.475, 0.655),
+        (0.600, 0.600, 0.600),
+    ]
+)
+
+
+#: sRGB grey for everything outside the region
+OUTSIDE_SRGB = (0.6, 0.6, 0.6)
+
+
+def outside_linear_rgba() -> np.ndarray:
+    """The linear RGBA (4,) float32 of `OUTSIDE_SRGB`."""
+    return np.array([*srgb_to_linear(np.array(OUTSIDE_SRGB)), 1.0], dtype=np.float32)
+
+
+def categorical_linear_rgba(labels: np.ndarray, outside=OUTSIDE_SRGB) -> np.ndarray:
+    """Integer labels (k,) -> linear RGBA (k,4) float32; negative labels get ``outside`` (sRGB).
+
+    Colours cycle through the 8 Okabe-Ito colours, darkened on each further cycle.
+    """
+    labels = np.asarray(labels, dtype=np.int64)
+    n = len(OKABE_ITO_SRGB)
+    lab = np.maximum(labels, 0)
+    srgb = OKABE_ITO_SRGB[lab % n] * (0.75 ** (lab // n))[:, None]
+    srgb[labels < 0] = outside
+    out = np.ones((len(labels), 4), dtype=np.float32)
     out[:, :3] = srgb_to_linear(srgb)
     return out

@@ -135,7 +135,9 @@ def smallest_eigenvectors(L: sp.spmatrix, k: int, rng=None) -> tuple[np.ndarray,
     else:
         scale = float(np.abs(L.diagonal()).mean()) or 1.0
         v0 = rng.standard_normal(n)
-        vals, vecs = eigsh(L.tocsc(), k=k, sigma=-1e-3 * scale, which="LM", v0=v0, tol=1e-10)
+        # shift just below 0 (L is singular): L - sigma I is positive definite and the
+        # wanted eigenvalues are the ones nearest the shift
+        vals, vecs = eigsh(L.tocsc(), k=k, sigma=-1e-6 * scale, which="LM", v0=v0, tol=1e-10)
         order = np.argsort(vals)
         vals, vecs = vals[order], vecs[:, order]
     idx = np.argmax(np.abs(vecs), axis=0)
@@ -147,7 +149,7 @@ def smallest_eigenvectors(L: sp.spmatrix, k: int, rng=None) -> tuple[np.ndarray,
 def cluster_rows(U: np.ndarray, k: int, method: str = "kmeans", rng=None) -> np.ndarray:
     """Cluster the rows of the spectral embedding U (n,d) into k labels (n,).
 
-    method: "kmeans" (scikit-learn KMeans, 10 restarts) or "gmm" (GaussianMixture,
+    method: "kmeans" (scikit-learn KMeans, k-means++ seeding, 4 restarts) or "gmm" (GaussianMixture,
     full covariances, 3 restarts).  Deterministic for a fixed ``rng``.
     """
     from sklearn.cluster import KMeans
@@ -155,7 +157,7 @@ def cluster_rows(U: np.ndarray, k: int, method: str = "kmeans", rng=None) -> np.
 
     seed = int(as_rng(rng).integers(0, 2**31 - 1))
     if method == "kmeans":
-        return KMeans(n_clusters=k, n_init=10, random_state=seed).fit_predict(U).astype(np.int64)
+        return KMeans(n_clusters=k, n_init=4, random_state=seed).fit_predict(U).astype(np.int64)
     if method == "gmm":
         gm = GaussianMixture(n_components=k, covariance_type="full", n_init=3, random_state=seed, reg_covar=1e-9)
         return gm.fit(U).predict(U).astype(np.int64)
@@ -313,6 +315,7 @@ def segment(
     face_groups: np.ndarray | None = None,
     high: float = HIGH_SALIENCY,
     progress=None,
+    topo: MeshTopology | None = None,
 ) -> Segmentation:
     """Segment a connected triangle mesh into edge-connected patches (module doc).
 
@@ -320,10 +323,11 @@ def segment(
     have more patches when a cluster falls apart, or fewer after crumbs are merged);
     eta: weight of the saliency term of eq. 4-5 (0 gives plain spectral clustering);
     smoothing_mm: analysis smoothing for the saliency (see saliency.py);
-    face_groups (m,): polygon of each triangle, kept in one patch.
+    face_groups (m,): polygon of each triangle, kept in one patch;
+    topo: a `MeshTopology` of (V, F) already built by the caller (saves rebuilding it).
     """
     report = progress or (lambda f, t: None)
-    topo = MeshTopology(V, F)
+    topo = MeshTopology(V, F) if topo is None else topo
     k = int(patches)
     if k < 1:
         raise BolusError(f"ask for at least 1 patch, got {patches}")

@@ -143,8 +143,10 @@ class MeshTopology:
     def _halfedges(self) -> tuple[np.ndarray, np.ndarray]:
         F = self.F
         he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)  # (3m,2)
-        key = np.sort(he, axis=1)
-        edges, inverse = np.unique(key, axis=0, return_inverse=True)
+        lo, hi = np.minimum(he[:, 0], he[:, 1]), np.maximum(he[:, 0], he[:, 1])
+        key = lo * max(self.n, 1) + hi  # 1-D keys: much faster than np.unique(axis=0)
+        ukey, inverse = np.unique(key, return_inverse=True)
+        edges = np.stack([ukey // max(self.n, 1), ukey % max(self.n, 1)], axis=1)
         return edges, inverse.reshape(-1)
 
     @cached_property
@@ -229,9 +231,8 @@ class MeshTopology:
         cols = np.concatenate(cols)
         G = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
         _, comp = connected_components(G, directed=False)
-        corner_vertex = self.F.ravel()
-        pairs = np.unique(np.stack([corner_vertex, comp], axis=1), axis=0)
-        return np.bincount(pairs[:, 0], minlength=self.n)
+        pairs = np.unique(self.F.ravel().astype(np.int64) * (3 * m) + comp)
+        return np.bincount(pairs // (3 * m), minlength=self.n)
 
     @cached_property
     def nonmanifold_vertices(self) -> np.ndarray:
