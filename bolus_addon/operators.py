@@ -13,15 +13,20 @@ import traceback
 
 import bpy
 import numpy as np
-from bpy.props import EnumProperty
-
 from . import mesh_io
 from .core.colormap import categorical_linear_rgba, outside_linear_rgba, scalar_to_linear_rgba
 from .core.errors import BolusError
 from .core.saliency import analyse
 from .core.spectral import segment
 from .core.topology import MeshTopology
-from .properties import COLOR_BY_ITEMS, METHOD_ITEMS, eta_property, patches_property, seed_property, smoothing_property
+from .properties import (
+    color_by_property,
+    eta_property,
+    method_property,
+    patches_property,
+    seed_property,
+    smoothing_property,
+)
 
 #: names fixed by SPEC.md
 ATTR_FLATTENABILITY = "bolus_flattenability"
@@ -70,6 +75,12 @@ class BolusOperator:
             return {"CANCELLED"}
         finally:
             wm.progress_end()
+
+    def read_region(self, context, allow_nonmanifold: bool):
+        """The region (mesh_io.read_region), its topology, checked, and the warnings so far."""
+        region = mesh_io.read_region(context)
+        topo = MeshTopology(region.V, region.F)
+        return region, topo, region.warnings + check_topology(topo, allow_nonmanifold)
 
     def progress(self, fraction: float, text: str = "") -> None:
         self._wm.progress_update(int(100 * min(max(fraction, 0.0), 1.0)))
@@ -120,12 +131,10 @@ class BOLUS_OT_saliency_preview(BolusOperator, bpy.types.Operator):
     bl_label = "Flattenability Preview"
 
     smoothing_mm: smoothing_property()
-    color_by: EnumProperty(name="Colour by", items=COLOR_BY_ITEMS, default="FLATTENABILITY")
+    color_by: color_by_property()
 
     def run(self, context):
-        region = mesh_io.read_region(context)
-        topo = MeshTopology(region.V, region.F)
-        warnings = region.warnings + check_topology(topo, allow_nonmanifold=True)
+        region, topo, warnings = self.read_region(context, allow_nonmanifold=True)
         self.progress(0.2)
         res = analyse(region.V, region.F, self.smoothing_mm, topo=topo)
         self.progress(0.8)
@@ -173,12 +182,10 @@ class BOLUS_OT_segment(BolusOperator, bpy.types.Operator):
     eta: eta_property()
     seed: seed_property()
     smoothing_mm: smoothing_property()
-    method: EnumProperty(name="Clustering", items=METHOD_ITEMS, default="KMEANS")
+    method: method_property()
 
     def run(self, context):
-        region = mesh_io.read_region(context)
-        topo = MeshTopology(region.V, region.F)
-        warnings = region.warnings + check_topology(topo, allow_nonmanifold=False)
+        region, topo, warnings = self.read_region(context, allow_nonmanifold=False)
         seg = segment(
             region.V,
             region.F,

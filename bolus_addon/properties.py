@@ -50,10 +50,18 @@ def seed_property(**kw):
     return IntProperty(name="Seed", description="Random seed of the eigen-solver start vector and the clustering", default=0, min=0, **kw)
 
 
+def color_by_property(**kw):
+    return EnumProperty(name="Colour by", items=COLOR_BY_ITEMS, default="FLATTENABILITY", **kw)
+
+
+def method_property(**kw):
+    return EnumProperty(name="Clustering", items=METHOD_ITEMS, default="KMEANS", **kw)
+
+
 class BolusSettings(bpy.types.PropertyGroup):
     smoothing_mm: smoothing_property()
-    color_by: EnumProperty(name="Colour by", items=COLOR_BY_ITEMS, default="FLATTENABILITY")
+    color_by: color_by_property()
     patches: patches_property()
     eta: eta_property()
     seed: seed_property()
-    method: EnumProperty(name="Clustering", items=METHOD_ITEMS, default="KMEANS")
+    method: method_property()
