@@ -331,8 +331,11 @@ def segment(
     k = int(patches)
     if k < 1:
         raise BolusError(f"ask for at least 1 patch, got {patches}")
-    if topo.m < k:
-        raise BolusError(f"the region has {topo.m} faces, fewer than the {k} patches asked")
+    nfaces = len(np.unique(face_groups)) if face_groups is not None else topo.m
+    if nfaces < k:
+        raise BolusError(f"the region has {nfaces} faces, fewer than the {k} patches asked")
+    if topo.n < k:
+        raise BolusError(f"the region has {topo.n} vertices, too few for the {k} patches asked")
     if not topo.used_vertices.all():
         raise BolusError("the mesh has vertices that belong to no face (loose vertices)")
     ncomp, _ = topo.face_components()

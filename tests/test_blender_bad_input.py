@@ -1,0 +1,330 @@
+"""Bad input for `bpy.ops.bolus.saliency_preview` and `bpy.ops.bolus.segment`.
+
+SPEC: an operator that cannot do its work reports a clear error and returns CANCELLED
+(from Python: RuntimeError carrying the message) and never leaves a half-changed mesh;
+inputs it can work around (loose vertices and edges, non-manifold edges for the
+preview) give a warning.  Meshes are small synthetic ones built with numpy.
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from conftest import attr_array, make_object, mesh_snapshot
+from meshgen import icosphere
+
+pytestmark = pytest.mark.blender
+
+OPS = ["saliency_preview", "segment"]
+ARGS = {"saliency_preview": {"smoothing_mm": 0.0}, "segment": {"patches": 2}}
+
+
+# --------------------------------------------------------------------------- helpers
+def call(bpy, op, **kw):
+    return getattr(bpy.ops.bolus, op)(**{**ARGS[op], **kw})
+
+
+def grid(nx, ny, h=1.0, offset=(0.0, 0.0, 0.0)):
+    """A bumpy (nx x ny)-quad grid, vertex (i, j) at index i*(ny+1)+j, size in units of h."""
+    xs, ys = np.meshgrid(np.arange(nx + 1) * h, np.arange(ny + 1) * h, indexing="ij")
+    z = 0.8 * h * np.sin(xs / (h * 2.0)) * np.cos(ys / (h * 3.0))
+    V = np.c_[xs.ravel(), ys.ravel(), z.ravel()] + np.asarray(offset)
+    idx = lambda i, j: i * (ny + 1) + j  # noqa: E731
+    F = [[idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)] for i in range(nx) for j in range(ny)]
+    return V, F
+
+
+def make_mesh(bpy, V, E, F, name="skin"):
+    """Like conftest.make_object, but with loose edges too."""
+    me = bpy.data.meshes.new(name)
+    me.from_pydata([tuple(map(float, v)) for v in np.asarray(V)], [tuple(e) for e in E], [tuple(f) for f in F])
+    me.validate()
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    bpy.context.view_layer.objects.active = ob
+    ob.select_set(True)
+    return ob
+
+
+def snapshot(ob):
+    """mesh_snapshot plus the values of our attributes and our custom properties."""
+    me = ob.data
+    ours = {}
+    for name in ("bolus_flattenability", "bolus_saliency"):
+        if name in me.attributes:
+            ours[name] = attr_array(me, name)
+    if "bolus_patch" in me.attributes:
+        ours["bolus_patch"] = attr_array(me, "bolus_patch", np.int64)
+    props = {k: ob[k] for k in ob.keys() if k.startswith("bolus_")}
+    return mesh_snapshot(me), ours, props, len(me.color_attributes)
+
+
+def assert_unchanged(before, after):
+    (co0, loops0, seams0, names0), ours0, props0, ncol0 = before
+    (co1, loops1, seams1, names1), ours1, props1, ncol1 = after
+    np.testing.assert_array_equal(co0, co1)
+    np.testing.assert_array_equal(loops0, loops1)
+    np.testing.assert_array_equal(seams0, seams1)
+    assert names0 == names1
+    assert ours0.keys() == ours1.keys()
+    for k in ours0:
+        np.testing.assert_array_equal(ours0[k], ours1[k])
+    assert props0 == props1
+    assert ncol0 == ncol1
+
+
+def raw_varpi(ob) -> np.ndarray:
+    """|theta - 2pi| on interior vertices (edges with exactly two triangles), world space, numpy only."""
+    me = ob.data
+    co = np.empty(len(me.vertices) * 3)
+    me.vertices.foreach_get("co", co)
+    M = np.array(ob.matrix_world)
+    V = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+    me.calc_loop_triangles()
+    T = np.empty(len(me.loop_triangles) * 3, dtype=np.int64)
+    me.loop_triangles.foreach_get("vertices", T)
+    T = T.reshape(-1, 3)
+    P = V[T]
+    a = np.roll(P, -1, axis=1) - P
+    b = np.roll(P, -2, axis=1) - P
+    ang = np.arctan2(np.linalg.norm(np.cross(a, b), axis=2), np.einsum("tkc,tkc->tk", a, b))
+    theta = np.bincount(T.ravel(), weights=ang.ravel(), minlength=len(V))
+    E = np.sort(np.stack([T, np.roll(T, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    uniq, count = np.unique(E, axis=0, return_counts=True)
+    interior = np.zeros(len(V), dtype=bool)
+    interior[T.ravel()] = True
+    interior[uniq[count != 2].ravel()] = False
+    return np.where(interior, np.abs(theta - 2.0 * math.pi), 0.0)
+
+
+def reports(capfd) -> str:
+    return capfd.readouterr().out
+
+
+# ------------------------------------------------------------- no usable object
+@pytest.mark.smoke
+@pytest.mark.parametrize("op", OPS)
+def test_no_active_object(bpy_addon, scene, op):
+    bpy = bpy_addon
+    ob = make_object(bpy, *grid(3, 3))
+    bpy.context.view_layer.objects.active = None
+    before = snapshot(ob)
+    with pytest.raises(RuntimeError, match="No active object"):
+        call(bpy, op)
+    assert_unchanged(before, snapshot(ob))
+    assert "bolus_patch" not in ob.data.attributes
+
+
+@pytest.mark.parametrize("op", OPS)
+@pytest.mark.parametrize("kind", ["empty", "camera"])
+def test_active_object_not_a_mesh(bpy_addon, scene, op, kind):
+    bpy = bpy_addon
+    ob = make_object(bpy, *grid(3, 3))  # a mesh in the scene, but not the active object
+    before = snapshot(ob)
+    if kind == "empty":
+        bpy.ops.object.empty_add()
+    else:
+        bpy.ops.object.camera_add()
+    other = bpy.context.active_object
+    assert other.type == kind.upper()
+    with pytest.raises(RuntimeError, match=f"'{other.name}' is not a mesh"):
+        call(bpy, op)
+    assert_unchanged(before, snapshot(ob))
+    assert not [k for k in other.keys() if k.startswith("bolus_")]
+
+
+# --------------------------------------------------------------- unusable meshes
+@pytest.mark.parametrize("op", OPS)
+def test_mesh_without_faces(bpy_addon, scene, op):
+    bpy = bpy_addon
+    ob = make_mesh(bpy, [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1), (1, 2), (2, 3)], [])
+    assert len(ob.data.polygons) == 0 and len(ob.data.edges) == 3
+    before = snapshot(ob)
+    with pytest.raises(RuntimeError, match="'skin' has no faces"):
+        call(bpy, op)
+    assert_unchanged(before, snapshot(ob))
+
+
+@pytest.mark.smoke
+@pytest.mark.parametrize("ntri,patches", [(1, 2), (2, 3), (4, 5)])
+def test_fewer_faces_than_patches(bpy_addon, scene, ntri, patches):
+    bpy = bpy_addon
+    V = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0.2), (2, 0, 0.1), (2, 1, 0.3)]
+    F = [(0, 1, 2), (1, 3, 2), (1, 4, 3), (4, 5, 3)][:ntri]
+    ob = make_object(bpy, V[: max(max(f) for f in F) + 1], F)
+    before = snapshot(ob)
+    with pytest.raises(RuntimeError, match=f"fewer than the {patches} patches asked"):
+        bpy.ops.bolus.segment(patches=patches)
+    assert_unchanged(before, snapshot(ob))
+
+
+def test_fewer_polygons_than_patches(bpy_addon, scene):
+    bpy = bpy_addon
+    ob = make_object(bpy, *grid(2, 1))  # 2 quads = 4 triangles
+    before = snapshot(ob)
+    with pytest.raises(RuntimeError, match="fewer than the 3 patches asked"):
+        bpy.ops.bolus.segment(patches=3)
+    assert_unchanged(before, snapshot(ob))
+
+
+def test_more_patches_than_vertices(bpy_addon, scene):
+    bpy = bpy_addon
+    V, F = icosphere(1, 0.05)  # 42 vertices, 80 triangles
+    ob = make_object(bpy, V, F)
+    before = snapshot(ob)
+    with pytest.raises(RuntimeError, match="42 vertices, too few for the 60 patches asked"):
+        bpy.ops.bolus.segment(patches=60)
+    assert_unchanged(before, snapshot(ob))
+
+
+@pytest.mark.parametrize("op", OPS)
+def test_zero_area_faces(bpy_addon, scene, op):
+    bpy = bpy_addon
+    V, F = grid(4, 4)
+    n = len(V)
+    # a sliver: three distinct vertices on a line, glued to the grid's corner vertex 0
+    V = np.r_[V, [[-1.0, 0.0, 0.0], [-2.0, 0.0, 0.0]]]
+    F = F + [[0, n, n + 1]]
+    ob = make_object(bpy, V, F)
+    assert len(ob.data.polygons) == 17  # validate() kept it: it is geometrically, not topologically, degenerate
+    before = snapshot(ob)
+    with pytest.raises(RuntimeError, match="1 faces have zero area"):
+        call(bpy, op)
+    assert_unchanged(before, snapshot(ob))
+
+
+def test_disconnected_parts(bpy_addon, scene):
+    bpy = bpy_addon
+    V1, F1 = grid(5, 5)
+    V2, F2 = grid(4, 4, offset=(20.0, 0.0, 0.0))
+    ob = make_object(bpy, np.r_[V1, V2], F1 + [[v + len(V1) for v in f] for f in F2], scale_length=0.001)
+    before = snapshot(ob)
+    with pytest.raises(RuntimeError, match="made of 2 separate parts"):
+        bpy.ops.bolus.segment(patches=2)
+    assert_unchanged(before, snapshot(ob))
+    # the preview has no reason to refuse: each part is measured as it is
+    assert bpy.ops.bolus.saliency_preview(smoothing_mm=0.0) == {"FINISHED"}
+    varpi = attr_array(ob.data, "bolus_flattenability")
+    np.testing.assert_allclose(varpi, raw_varpi(ob), rtol=1e-5, atol=1e-6)
+    assert varpi[: len(V1)].max() > 0 and varpi[len(V1) :].max() > 0
+    assert bpy.ops.bolus.saliency_preview(smoothing_mm=2.0) == {"FINISHED"}
+
+
+def nonmanifold_grid(bpy):
+    """4x4 grid with a third face on the interior edge (6, 7)."""
+    V, F = grid(4, 4)
+    V = np.r_[V, [[1.5, 1.0, 2.0]]]
+    F = F + [[6, 7, len(V) - 1]]
+    return make_object(bpy, V, F)
+
+
+def test_nonmanifold_edge_segment_refuses(bpy_addon, scene):
+    bpy = bpy_addon
+    ob = nonmanifold_grid(bpy)
+    before = snapshot(ob)
+    with pytest.raises(RuntimeError, match="1 non-manifold edges"):
+        bpy.ops.bolus.segment(patches=2)
+    assert_unchanged(before, snapshot(ob))
+
+
+def test_nonmanifold_edge_preview_warns(bpy_addon, scene, capfd):
+    bpy = bpy_addon
+    ob = nonmanifold_grid(bpy)
+    reports(capfd)
+    assert bpy.ops.bolus.saliency_preview(smoothing_mm=0.0) == {"FINISHED"}
+    out = reports(capfd)
+    assert "Warning" in out and "non-manifold" in out
+    varpi = attr_array(ob.data, "bolus_flattenability")
+    assert varpi[6] == 0 and varpi[7] == 0 and varpi[-1] == 0
+    np.testing.assert_allclose(varpi, raw_varpi(ob), rtol=1e-5, atol=1e-6)
+    assert varpi.max() > 0
+
+
+def test_nonmanifold_vertex_segment_refuses(bpy_addon, scene):
+    bpy = bpy_addon
+    # two grids touching at one corner vertex (a bow-tie)
+    V1, F1 = grid(3, 3)
+    V2, F2 = grid(3, 3, offset=(3.0, 3.0, 0.0))
+    n1 = len(V1)
+    V2 = V2[1:]  # vertex 0 of the second grid is vertex 15 (3, 3) of the first
+    F2 = [[15 if v == 0 else v - 1 + n1 for v in f] for f in F2]
+    ob = make_object(bpy, np.r_[V1, V2], F1 + F2)
+    before = snapshot(ob)
+    with pytest.raises(RuntimeError, match="non-manifold vertices"):
+        bpy.ops.bolus.segment(patches=2)
+    assert_unchanged(before, snapshot(ob))
+
+
+@pytest.mark.parametrize("op", OPS)
+def test_loose_vertices_and_edges_are_ignored(bpy_addon, scene, capfd, op):
+    bpy = bpy_addon
+    V, F = grid(6, 6)
+    n = len(V)
+    clean = make_object(bpy, V, F, name="clean")
+    call(bpy, op)
+    V = np.r_[V, [[50.0, 50.0, 50.0], [60.0, 60.0, 60.0], [70.0, 70.0, 70.0]]]
+    ob = make_mesh(bpy, V, [(n + 1, n + 2)], F)  # one lone vertex, one loose edge
+    reports(capfd)
+    assert call(bpy, op) == {"FINISHED"}
+    out = reports(capfd)
+    assert "3 loose vertices" in out and "1 loose edges" in out
+    if op == "saliency_preview":
+        varpi = attr_array(ob.data, "bolus_flattenability")
+        assert np.all(varpi[n:] == 0)
+        np.testing.assert_allclose(varpi[:n], attr_array(clean.data, "bolus_flattenability"), rtol=1e-6)
+        assert ob["bolus_sum_varpi"] == pytest.approx(clean["bolus_sum_varpi"], rel=1e-9)
+    else:
+        lab = attr_array(ob.data, "bolus_patch", np.int64)
+        np.testing.assert_array_equal(lab, attr_array(clean.data, "bolus_patch", np.int64))
+        assert lab.min() == 0 and lab.max() >= 1
+        loose_edge = [e.index for e in ob.data.edges if set(e.vertices) == {n + 1, n + 2}]
+        assert len(loose_edge) == 1 and not ob.data.edges[loose_edge[0]].use_seam
+
+
+# --------------------------------------------- a failure must not undo earlier work
+def test_failed_segment_keeps_previous_result(bpy_addon, scene):
+    bpy = bpy_addon
+    ob = make_object(bpy, *grid(6, 6))
+    assert bpy.ops.bolus.segment(patches=3) == {"FINISHED"}
+    assert bpy.ops.bolus.saliency_preview(smoothing_mm=0.0) == {"FINISHED"}
+    before = snapshot(ob)
+    assert before[0][2].any() and "bolus_patch" in before[1]
+    with pytest.raises(RuntimeError, match="64"):
+        bpy.ops.bolus.segment(patches=64)
+    assert_unchanged(before, snapshot(ob))
+    table = json.loads(ob["bolus_patch_table"])
+    assert table["requested"] == 3
+
+
+def test_error_in_edit_mode_stays_in_edit_mode(bpy_addon, scene):
+    """A selection of two islands: segment refuses, Edit Mode and the mesh are kept."""
+    bpy = bpy_addon
+    ob = make_object(bpy, *grid(6, 6))
+    me = ob.data
+    sel = np.zeros(len(me.polygons), dtype=bool)
+    sel[[0, 1, 6, 7]] = True  # quads (0,0),(0,1),(1,0),(1,1): one island
+    sel[[28, 29, 34, 35]] = True  # quads (4,4),(4,5),(5,4),(5,5): another
+    vsel = np.zeros(len(me.vertices), dtype=bool)
+    for p in me.polygons:
+        if sel[p.index]:
+            vsel[list(p.vertices)] = True
+    me.vertices.foreach_set("select", vsel)
+    me.polygons.foreach_set("select", sel)
+    bpy.context.tool_settings.mesh_select_mode = (False, False, True)
+    before = snapshot(ob)
+    bpy.ops.object.mode_set(mode="EDIT")
+    with pytest.raises(RuntimeError, match="made of 2 separate parts"):
+        bpy.ops.bolus.segment(patches=2)
+    assert ob.mode == "EDIT"
+    # ... while the preview works on the same selection
+    assert bpy.ops.bolus.saliency_preview(smoothing_mm=0.0) == {"FINISHED"}
+    assert ob.mode == "EDIT"
+    bpy.ops.object.mode_set(mode="OBJECT")
+    after = snapshot(ob)
+    (co0, loops0, seams0, _), _, _, _ = before
+    (co1, loops1, seams1, names1), ours1, _, _ = after
+    np.testing.assert_array_equal(co0, co1)
+    np.testing.assert_array_equal(seams0, seams1)
+    assert "bolus_patch" not in names1 and "bolus_flattenability" in ours1
