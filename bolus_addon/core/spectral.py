@@ -180,15 +180,18 @@ def faces_from_vertex_labels(
         face_groups = np.asarray(face_groups)
         areas = np.ones(len(F)) if areas is None else areas
         # area of each (group, label) pair; the label with the largest area wins
-        key = np.stack([face_groups, lab], axis=1)
-        uniq, inv = np.unique(key, axis=0, return_inverse=True)
+        nl = int(lab.max()) + 1
+        ukey, inv = np.unique(face_groups.astype(np.int64) * nl + lab, return_inverse=True)
+        uniq = np.stack([ukey // nl, ukey % nl], axis=1)
         inv = inv.reshape(-1)
         tot = np.bincount(inv, weights=areas)
         order = np.lexsort((-tot, uniq[:, 0]))  # by group, largest area first
         first = np.ones(len(order), dtype=bool)
         first[1:] = uniq[order[1:], 0] != uniq[order[:-1], 0]
-        winner = dict(zip(uniq[order[first], 0].tolist(), uniq[order[first], 1].tolist()))
-        lab = np.array([winner[g] for g in face_groups.tolist()], dtype=np.int64)
+        groups, g_inv = np.unique(face_groups, return_inverse=True)
+        winner = np.empty(len(groups), dtype=np.int64)
+        winner[np.searchsorted(groups, uniq[order[first], 0])] = uniq[order[first], 1]
+        lab = winner[g_inv.reshape(-1)]
     return lab.astype(np.int64)
 
 
