@@ -104,3 +104,66 @@ def sheet_with_dome(R=30.0, R_out=90.0, n_sheet=12, n_dome=8, na=48):
     geo[ring < 0] = R * np.pi / 2
     # consistent outward orientation (normals +z on the sheet)
     return V, F, geo
+
+
+def spherical_cap(R=100.0, half_angle_deg=60.0, subdivisions=5):
+    """Spherical cap of radius R up to the polar angle half_angle (open disk), cut from an
+    icosphere (well-shaped triangles; 5 subdivisions: 20,480 faces on the whole sphere)."""
+    V, F = icosphere(subdivisions, R)
+    # rotate so that no icosphere vertex sits exactly on the pole axis direction bias
+    C = V[F].mean(axis=1)
+    keep = C[:, 2] / np.linalg.norm(C, axis=1) >= np.cos(np.radians(half_angle_deg))
+    Fk = F[keep]
+    used, inv = np.unique(Fk, return_inverse=True)
+    return V[used], inv.reshape(-1, 3)
+
+
+def cone_piece(r0=20.0, r1=60.0, height=50.0, angle=np.pi, na=24, nl=10):
+    """Part of a cone (developable)."""
+    t, s = np.meshgrid(np.linspace(0, angle, na + 1), np.linspace(0, 1, nl + 1), indexing="ij")
+    r = r0 + (r1 - r0) * s
+    V = np.stack([(r * np.cos(t)).ravel(), (r * np.sin(t)).ravel(), (height * s).ravel()], axis=1)
+    _, F = grid(na, nl)
+    return V, F
+
+
+def grid_with_holes(nx=12, ny=12, size=120.0, holes=((4, 4, 8, 8),)):
+    """Grid with rectangular holes: each hole (i0, j0, i1, j1) removes the cells i0 <= i < i1,
+    j0 <= j < j1 (cell (i, j) spans x in [i, i+1] * size / nx).  Unused vertices are dropped."""
+    V, F = grid(nx, ny, size)
+    ci, cj = np.divmod(np.arange(nx * ny), ny)
+    cell_i, cell_j = np.r_[ci, ci], np.r_[cj, cj]  # grid() lists the two triangles of every cell
+    keep = np.ones(len(F), dtype=bool)
+    for i0, j0, i1, j1 in holes:
+        keep &= ~((cell_i >= i0) & (cell_i < i1) & (cell_j >= j0) & (cell_j < j1))
+    F = F[keep]
+    used = np.unique(F)
+    remap = np.full(len(V), -1)
+    remap[used] = np.arange(len(used))
+    return V[used], remap[F]
+
+
+def torus(R=60.0, r=20.0, na=32, nb=12):
+    """Closed torus (genus 1) around the z axis, outward normals."""
+    a, b = np.meshgrid(np.linspace(0, 2 * np.pi, na, endpoint=False), np.linspace(0, 2 * np.pi, nb, endpoint=False),
+                       indexing="ij")
+    V = np.stack([(R + r * np.cos(b)) * np.cos(a), (R + r * np.cos(b)) * np.sin(a), r * np.sin(b)], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(na), np.arange(nb), indexing="ij")
+    p00, p10 = i * nb + j, ((i + 1) % na) * nb + j
+    p11, p01 = ((i + 1) % na) * nb + (j + 1) % nb, i * nb + (j + 1) % nb
+    F = np.concatenate([np.stack([p00, p10, p11], -1).reshape(-1, 3), np.stack([p00, p11, p01], -1).reshape(-1, 3)])
+    return V, F
+
+
+def spiral_strip(turns=1.27, r0=60.0, pitch=6.0, width=12.0, na=120, nw=3):
+    """Flat strip (z = 0) wound along a spiral of radius r0 - pitch * t / (2 pi): with
+    pitch < width and turns > 1 the end lies over the start.  Counter-clockwise triangles,
+    none flipped.  Keep na / turns non-integer (not 120 / 1.25): otherwise the angle step
+    divides 2 pi, vertices of the end fall exactly on edges of the start and the outlines
+    only touch instead of crossing."""
+    t, w = np.meshgrid(np.linspace(0, 2 * np.pi * turns, na + 1), np.linspace(-width / 2, width / 2, nw + 1),
+                       indexing="ij")
+    r = r0 - pitch * t / (2 * np.pi) - w
+    V = np.stack([(r * np.cos(t)).ravel(), (r * np.sin(t)).ravel(), np.zeros(t.size)], axis=1)
+    _, F = grid(na, nw)
+    return V, F
