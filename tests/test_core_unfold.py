@@ -1,0 +1,142 @@
+"""Unfolding (seed 3.5, 4.5): developable surfaces exactly, curved ones without flips."""
+import numpy as np
+import pytest
+from meshgen import cone_piece, cylinder_piece, grid, height_field, ring_surface, spherical_cap
+
+from bolus_addon.core.errors import BolusError
+from bolus_addon.core.overlap import overlapping_faces, signed_areas
+from bolus_addon.core.topology import MeshTopology
+from bolus_addon.core.unfold import (
+    assemble_pattern,
+    build_springs,
+    initial_unfolding,
+    iter_unfold_patches,
+    length_area_errors,
+    relax_explicit,
+    relax_lbfgs,
+    spring_energy,
+    unfold_patch,
+)
+
+
+def _edge_lengths(P, F):
+    return np.concatenate([np.linalg.norm(P[F[:, k]] - P[F[:, (k + 1) % 3]], axis=1) for k in range(3)])
+
+
+@pytest.mark.parametrize("maker", [lambda: cylinder_piece(40.0, 1.5 * np.pi), lambda: cone_piece()])
+@pytest.mark.parametrize("method", ["lbfgs", "explicit"])
+def test_developable_surfaces_unfold_exactly(maker, method):
+    V, F = maker()
+    u = unfold_patch(V, F, method=method)
+    assert u.EL < 1e-6 and u.EA < 1e-6
+    assert u.flipped == 0 and u.overlaps == 0
+
+
+def test_flat_patch_unfolds_isometrically():
+    V, F = grid(12, 9, jitter=0.3)
+    R = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))[0]
+    V3 = V @ R.T + [5.0, -7.0, 11.0]  # a flat sheet somewhere in space
+    u = unfold_patch(V3, F)
+    np.testing.assert_allclose(_edge_lengths(u.UV, u.F), _edge_lengths(V3, F), atol=1e-9)
+    assert (signed_areas(u.UV, u.F) > 0).all()
+
+
+def test_initial_unfolding_is_exact_on_developable_patch():
+    V, F = cylinder_piece(30.0, np.pi, na=20, nl=12)
+    topo = MeshTopology(V, F)
+    UV = initial_unfolding(topo)  # 4.5.1 alone: central crossing + layers, no relaxation
+    EL, EA = length_area_errors(V, F, UV)
+    assert EL < 1e-9 and EA < 1e-9
+
+
+def test_sixty_degree_cap_has_no_flips_and_bounded_error():
+    V, F = spherical_cap(100.0, 60.0, 5)
+    u = unfold_patch(V, F)
+    assert u.flipped == 0 and u.overlaps == 0
+    assert (signed_areas(u.UV, u.F) > 0).all()
+    assert not overlapping_faces(u.UV, u.F).any()
+    # a sphere cannot be flattened: some error remains, but it is a few percent
+    assert 0.01 < u.EL < 0.045 and 0.01 < u.EA < 0.06
+
+
+def test_length_refinement_lowers_length_error():
+    V, F = spherical_cap(100.0, 60.0, 4)
+    plain = unfold_patch(V, F, refine_rounds=0)
+    refined = unfold_patch(V, F, refine_rounds=3)
+    assert refined.EL < plain.EL * 0.9
+
+
+def test_spring_gradient_matches_finite_differences():
+    V, F = height_field(lambda x, y: (x**2 - y**2) / 200.0, nx=6, ny=6)
+    topo = MeshTopology(V, F)
+    springs = build_springs(topo, contour_window=4)
+    assert len(springs.contour_rest) > 0 and len(springs.rest) > len(topo.edges)  # crossed + contour
+    x = initial_unfolding(topo).ravel() + np.random.default_rng(0).normal(0, 0.3, 2 * topo.n)
+    e, g = spring_energy(x, springs, topo.n)
+    h = 1e-6
+    for i in np.random.default_rng(1).choice(len(x), 12, replace=False):
+        d = np.zeros_like(x)
+        d[i] = h
+        fd = (spring_energy(x + d, springs, topo.n)[0] - spring_energy(x - d, springs, topo.n)[0]) / (2 * h)
+        assert fd == pytest.approx(g[i], rel=1e-5, abs=1e-7)
+
+
+def test_both_integrators_lower_the_same_energy():
+    V, F = spherical_cap(100.0, 45.0, 3)
+    topo = MeshTopology(V, F)
+    springs = build_springs(topo)
+    UV0 = initial_unfolding(topo)
+    e0, _ = spring_energy(UV0.ravel(), springs, topo.n)
+    masses = np.bincount(F.ravel(), weights=np.repeat(topo.areas / 3, 3), minlength=topo.n)
+    _, _, e_explicit = relax_explicit(UV0, springs, masses, max_iter=3000)
+    _, _, e_lbfgs = relax_lbfgs(UV0, springs)
+    assert e_lbfgs < e0 and e_explicit < e0
+    assert e_lbfgs <= e_explicit * (1 + 1e-6)  # the minimiser reaches at least as low
+
+
+def test_ring_is_cut_to_a_disk_and_unfolded():
+    t = np.linspace(0, 1, 9)
+    profile = np.stack([40.0 + 0 * t, 60.0 * t], axis=1)  # open cylinder (a knee-like tube)
+    V, F, _ = ring_surface(profile, na=32, pole=False)
+    u = unfold_patch(V, F)
+    assert "cut along" in u.cut
+    assert len(u.UV) > len(V)  # the cut's vertices appear twice
+    np.testing.assert_array_equal(np.sort(np.unique(u.vert_origin)), np.arange(len(V)))
+    np.testing.assert_array_equal(u.vert_origin[u.F], F)  # same triangles, same corner order
+    assert u.EL < 1e-6 and u.flipped == 0
+
+
+def test_patches_assemble_without_overlap_and_map_back():
+    V, F = spherical_cap(100.0, 50.0, 4)
+    x = V[F].mean(axis=1)[:, 0]
+    labels = np.where(x < 0, 0, 1)
+    patches = [u for _, _, u in iter_unfold_patches(V, F, labels)]
+    pat = assemble_pattern(F, labels, patches, gap_mm=5.0)
+    assert pat.F.shape == F.shape and (pat.F >= 0).all()
+    np.testing.assert_array_equal(pat.vert_source[pat.F], F)  # every pattern face is its source face
+    np.testing.assert_array_equal(pat.tri_patch, labels)
+    # the same errors as each patch alone (layout is rigid)
+    for p, u in enumerate(patches):
+        rows = labels == p
+        el, ea = length_area_errors(V, F[rows], _relabel(pat, rows, V))
+        assert el == pytest.approx(u.EL, abs=1e-9) and ea == pytest.approx(u.EA, abs=1e-9)
+    assert not overlapping_faces(pat.UV, pat.F).any()
+
+
+def _relabel(pat, rows, V):
+    """Pattern positions laid out on the source vertex numbering of one patch."""
+    UV = np.zeros((len(V), 2))
+    UV[pat.vert_source[pat.F[rows]].ravel()] = pat.UV[pat.F[rows]].reshape(-1, 2)
+    return UV
+
+
+def test_bad_patches():
+    V, F = grid(1, 1)
+    with pytest.raises(BolusError, match="too small"):
+        unfold_patch(V, F)
+    with pytest.raises(BolusError, match="method"):
+        unfold_patch(*grid(3, 3), method="magic")
+    Vz, Fz = grid(3, 3)
+    Vz[:, :] = 0.0
+    with pytest.raises(BolusError, match="no area"):
+        unfold_patch(Vz, Fz)
