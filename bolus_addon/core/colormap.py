@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["VIRIDIS_SRGB", "scalar_to_linear_rgba", "categorical_linear_rgba", "outside_linear_rgba", "srgb_to_linear", "robust_max"]
+__all__ = ["VIRIDIS_SRGB", "scalar_to_linear_rgba", "categorical_linear_rgba", "diverging_linear_rgba", "outside_linear_rgba", "srgb_to_linear", "robust_max"]
 
 #: matplotlib's viridis at t = 0, 1/16, ..., 1 (sRGB)
 VIRIDIS_SRGB = np.array(
@@ -99,5 +99,20 @@ def categorical_linear_rgba(labels: np.ndarray, outside=OUTSIDE_SRGB) -> np.ndar
     srgb = OKABE_ITO_SRGB[lab % n] * (0.75 ** (lab // n))[:, None]
     srgb[labels < 0] = outside
     out = np.ones((len(labels), 4), dtype=np.float32)
+    out[:, :3] = srgb_to_linear(srgb)
+    return out
+
+
+def diverging_linear_rgba(values: np.ndarray, vmax: float) -> np.ndarray:
+    """Signed values (k,) -> linear RGBA (k,4): blue (-vmax, shrunk) - white (0) - red (+vmax, stretched).
+
+    sRGB end colours (0.23, 0.30, 0.75) and (0.71, 0.02, 0.15) of Moreland's cool-warm map.
+    """
+    t = np.clip(np.asarray(values, dtype=np.float64) / float(vmax), -1.0, 1.0)[:, None]
+    white = np.array([0.97, 0.97, 0.97])
+    cold = np.array([0.23, 0.30, 0.75])
+    warm = np.array([0.71, 0.02, 0.15])
+    srgb = np.where(t < 0, white + (cold - white) * (-t), white + (warm - white) * t)
+    out = np.ones((len(t), 4), dtype=np.float32)
     out[:, :3] = srgb_to_linear(srgb)
     return out

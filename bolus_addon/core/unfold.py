@@ -63,6 +63,7 @@ __all__ = [
     "build_springs",
     "spring_energy",
     "initial_unfolding",
+    "conformal_unfolding",
     "relax_lbfgs",
     "stiffness_laplacian",
     "relax_explicit",
@@ -72,6 +73,7 @@ __all__ = [
     "assemble_pattern",
     "Pattern",
     "length_area_errors",
+    "polygon_errors",
 ]
 
 CONTOUR_WINDOW = 8
@@ -94,6 +96,35 @@ def length_area_errors(V: np.ndarray, F: np.ndarray, UV: np.ndarray) -> tuple[fl
     A0 = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
     A = signed_areas(UV, F)
     return float(np.abs(L - L0).sum() / L0.sum()), float(np.abs(A - A0).sum() / A0.sum())
+
+
+def polygon_errors(V_src: np.ndarray, corners_src: np.ndarray, V_pat: np.ndarray, corners_pat: np.ndarray,
+                   sizes: np.ndarray, groups: np.ndarray | None = None) -> dict:
+    """EL and EA exactly as SPEC measures a pattern against its source, per group.
+
+    V_src (n,3) and V_pat (k,2 or 3) in the same unit; corners_* (c,) the corner
+    vertices of matching polygons (same order, same sizes (p,)); every polygon is fanned
+    from its first corner; groups (p,) optional labels (e.g. patches).
+    Returns {group: (EL, EA, flipped)} and the key None for all polygons together.
+    """
+    from .topology import triangulate_polygons
+
+    Fs, tri_poly = triangulate_polygons(corners_src, sizes)
+    Fp, _ = triangulate_polygons(corners_pat, sizes)
+    P = np.asarray(V_pat, dtype=np.float64)[:, :2]
+    L0 = np.stack([np.linalg.norm(V_src[Fs[:, k]] - V_src[Fs[:, (k + 1) % 3]], axis=1) for k in range(3)], 1)
+    L = np.stack([np.linalg.norm(P[Fp[:, k]] - P[Fp[:, (k + 1) % 3]], axis=1) for k in range(3)], 1)
+    A0 = 0.5 * np.linalg.norm(np.cross(V_src[Fs[:, 1]] - V_src[Fs[:, 0]], V_src[Fs[:, 2]] - V_src[Fs[:, 0]]), axis=1)
+    A = signed_areas(P, Fp)
+    out = {}
+    g = np.zeros(len(sizes), dtype=np.int64) if groups is None else np.asarray(groups)
+    tg = g[tri_poly]
+    for key in [None, *np.unique(tg).tolist()]:
+        sel = np.ones(len(tg), dtype=bool) if key is None else tg == key
+        el = float(np.abs(L[sel] - L0[sel]).sum() / L0[sel].sum())
+        ea = float(np.abs(A[sel] - A0[sel]).sum() / A0[sel].sum())
+        out[key] = (el, ea, int(np.count_nonzero(A[sel] <= 0)))
+    return out
 
 
 # --------------------------------------------------------------------------- springs
@@ -642,16 +673,70 @@ def initial_unfolding(topo: MeshTopology, directions: int = STRIPE_DIRECTIONS,
     return UV
 
 
+def conformal_unfolding(topo: MeshTopology) -> np.ndarray:
+    """Least-squares conformal map (Levy et al. 2002) scaled to true area: UV (n,2).
+
+    Our fallback start for patches where the greedy unfolding of 4.5.1 folds over
+    (strongly curved patches): LSCM is the minimiser of a convex quadratic, so it has no
+    accumulated error; two far-apart boundary vertices are pinned.
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import spsolve
+
+    V, F, n, m = topo.V, topo.F, topo.n, topo.m
+    # each triangle in its own plane: p0 at 0, p1 on the x axis
+    e1 = V[F[:, 1]] - V[F[:, 0]]
+    e2 = V[F[:, 2]] - V[F[:, 0]]
+    l1 = np.linalg.norm(e1, axis=1)
+    x1 = l1
+    x2 = np.einsum("ij,ij->i", e1, e2) / l1
+    y2 = np.linalg.norm(np.cross(e1, e2), axis=1) / l1
+    xs = np.stack([np.zeros(m), x1, x2], 1)
+    ys = np.stack([np.zeros(m), np.zeros(m), y2], 1)
+    d = np.sqrt(np.maximum(xs[:, 1] * ys[:, 2], 1e-300))  # sqrt(2 A)
+    # W_j = (x_{j+2} - x_{j+1}) + i (y_{j+2} - y_{j+1})
+    Wr = (np.roll(xs, -2, axis=1) - np.roll(xs, -1, axis=1)) / d[:, None]
+    Wi = (np.roll(ys, -2, axis=1) - np.roll(ys, -1, axis=1)) / d[:, None]
+    rows = np.repeat(np.arange(m), 3)
+    cols = F.ravel()
+    # unknowns [u (n), v (n)]; real rows: Wr u - Wi v; imaginary rows: Wi u + Wr v
+    R = sp.coo_matrix((np.r_[Wr.ravel(), -Wi.ravel()], (np.r_[rows, rows], np.r_[cols, cols + n])), shape=(m, 2 * n))
+    I_ = sp.coo_matrix((np.r_[Wi.ravel(), Wr.ravel()], (np.r_[rows, rows], np.r_[cols, cols + n])), shape=(m, 2 * n))
+    A = sp.vstack([R, I_]).tocsr()
+    b = np.nonzero(topo.boundary_vertices)[0]
+    if len(b) < 2:
+        b = np.arange(n)
+    p0 = b[np.argmax(np.linalg.norm(V[b] - V[b].mean(axis=0), axis=1))]
+    p1 = b[np.argmax(np.linalg.norm(V[b] - V[p0], axis=1))]
+    dist = float(np.linalg.norm(V[p1] - V[p0]))
+    fixed = np.array([p0, p1, p0 + n, p1 + n])
+    vals = np.array([0.0, dist, 0.0, 0.0])
+    free = np.setdiff1d(np.arange(2 * n), fixed)
+    Af, Ax = A[:, free], A[:, fixed]
+    rhs = -(Ax @ vals)
+    sol = spsolve((Af.T @ Af).tocsc(), Af.T @ rhs)
+    x = np.empty(2 * n)
+    x[free] = sol
+    x[fixed] = vals
+    UV = np.stack([x[:n], x[n:]], axis=1)
+    A2 = signed_areas(UV, F)
+    if A2.sum() < 0:
+        UV[:, 1] = -UV[:, 1]
+    UV *= np.sqrt(topo.areas.sum() / max(abs(A2.sum()), 1e-300))
+    return UV
+
+
 # --------------------------------------------------------------------------- L1 refinement
 def refine_lengths_l1(UV, springs: Springs, face_count: np.ndarray, rounds: int = 3,
-                      crossed_weight: float = 0.0, max_iter: int = 60) -> tuple[np.ndarray, int]:
+                      crossed_weight: float = 0.0, max_iter: int = 60, F=None, A0=None) -> tuple[np.ndarray, int]:
     """Iteratively reweighted least squares towards min sum kappa_e |l_e - D_e| (the numerator of EL).
 
     Our addition after the spring relaxation: the spring energy is a sum of squares,
     while EL (eq. 3-30) sums absolute errors; reweighting the tension springs by
     kappa / |l - D| (kappa = faces on the edge, as EL counts every face's edges) for a
     few rounds minimises EL itself.  Crossed springs keep ``crossed_weight`` times their
-    stiffness.  Returns (UV, iterations).
+    stiffness.  With F and A0 (m,) the flip penalty stays on, so that no triangle is
+    turned over on the way.  Returns (UV, iterations).
     """
     nt = springs.n_tension
     no_windows = np.zeros((0, springs.contour_edges.shape[1]), dtype=np.int64)
@@ -665,9 +750,29 @@ def refine_lengths_l1(UV, springs: Springs, face_count: np.ndarray, rounds: int 
         w *= np.median(springs.stiffness[:nt]) / np.median(w)
         sp_.stiffness[:nt] = w
         sp_.stiffness[nt:] = springs.stiffness[nt:] * crossed_weight
-        X, it, _ = relax_lbfgs(X, sp_, max_iter=max_iter, tol=1e-6)
+        X, it, _ = relax_lbfgs(X, sp_, max_iter=max_iter, tol=1e-6, F=F, A0=A0,
+                               flip_weight=FLIP_WEIGHT if F is not None else 0.0)
         its += it
     return X, its
+
+
+FLIP_WEIGHT = 10.0
+
+
+def _correct_flips(UV, springs: Springs, topo: MeshTopology, rounds: int = 4, max_iter: int = 300):
+    """Overlap correction (4.5.3): push flipped triangles back with a growing penalty.
+
+    Returns (UV, iterations, triangles still flipped)."""
+    flipped = int(np.count_nonzero(signed_areas(UV, topo.F) <= 0))
+    weight, its = FLIP_WEIGHT, 0
+    for _ in range(rounds):
+        if flipped == 0:
+            break
+        UV, it, _ = relax_lbfgs(UV, springs, max_iter=max_iter, F=topo.F, A0=topo.areas, flip_weight=weight)
+        its += it
+        flipped = int(np.count_nonzero(signed_areas(UV, topo.F) <= 0))
+        weight *= 10.0
+    return UV, its, flipped
 
 
 # --------------------------------------------------------------------------- pipeline
@@ -728,30 +833,37 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     UV = initial_unfolding(topo, springs=springs)
     report(0.3, "relaxing springs")
     warnings: list[str] = []
-    if method == "lbfgs":
-        UV, it, e = relax_lbfgs(UV, springs, max_iter=max_iter or 2000)
-    else:
-        UV, it, e = relax_explicit(UV, springs, _lumped_masses(topo), max_iter=max_iter or 20000)
-    A = signed_areas(UV, topo.F)
-    if np.sum(A) < 0:  # counter-clockwise, like the 3D corner order seen from outside
-        UV[:, 0] = -UV[:, 0]
+
+    def relax(start):
+        if method == "lbfgs":
+            X, its, _ = relax_lbfgs(start, springs, max_iter=max_iter or 2000)
+        else:
+            X, its, _ = relax_explicit(start, springs, _lumped_masses(topo), max_iter=max_iter or 20000)
+        if np.sum(signed_areas(X, topo.F)) < 0:  # counter-clockwise, like the 3D corner order
+            X[:, 0] = -X[:, 0]
+        X, its2, nflip = _correct_flips(X, springs, topo)
+        return X, its + its2, nflip
+
+    UV, it, flipped = relax(UV)
+    if flipped:
+        # the greedy unfolding folded over (a strongly curved patch): start again from
+        # the least-squares conformal map and keep whichever ends better
+        report(0.5, "conformal start")
+        UV2, it2, flipped2 = relax(conformal_unfolding(topo))
+        it += it2
+        e1 = spring_energy(UV.ravel(), springs, topo.n)[0]
+        e2 = spring_energy(UV2.ravel(), springs, topo.n)[0]
+        if (flipped2, e2) < (flipped, e1):
+            UV, flipped = UV2, flipped2
+            warnings.append("started from a conformal map: the coordinate transformation of 4.5.1 folded over")
     if refine_rounds > 0:
-        report(0.6, "length refinement")
+        report(0.7, "length refinement")
         face_count = topo.edge_face_count.astype(np.float64)
-        UV, it2 = refine_lengths_l1(UV, springs, face_count, rounds=refine_rounds)
+        UV, it2 = refine_lengths_l1(UV, springs, face_count, rounds=refine_rounds,
+                                    F=topo.F if flipped == 0 else None, A0=topo.areas)
         it += it2
-    report(0.85, "overlap correction")
-    A = signed_areas(UV, topo.F)
-    flipped = int(np.count_nonzero(A <= 0))
-    weight = 10.0
-    for _ in range(6):
-        if flipped == 0:
-            break
-        UV, it2, e = relax_lbfgs(UV, springs, max_iter=max_iter or 2000, F=topo.F, A0=topo.areas,
-                                 flip_weight=weight)
+        UV, it2, flipped = _correct_flips(UV, springs, topo)
         it += it2
-        flipped = int(np.count_nonzero(signed_areas(UV, topo.F) <= 0))
-        weight *= 10.0
     e, _ = spring_energy(UV.ravel(), springs, topo.n)
     if flipped:
         warnings.append(f"{flipped} triangles remain flipped after the overlap correction")
