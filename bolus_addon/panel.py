@@ -6,6 +6,7 @@ import json
 import bpy
 
 from .operators import PROP_FLV, PROP_PATCH_TABLE, PROP_SUM_VARPI
+from .pattern_ops import PATTERN_SUFFIX, PROP_PATTERN_TABLE
 
 
 class VIEW3D_PT_bolus(bpy.types.Panel):
@@ -53,6 +54,34 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
                 for r in table:
                     for val in (str(r["patch"]), str(r["vertices"]), str(r["faces"]), f"{r['sum_varpi']:.2f}", f"{r['flv']:.3g}"):
                         grid.label(text=val)
+
+        box = layout.box()
+        box.label(text="3. Flat pattern", icon="UV")
+        box.prop(s, "unfold_method")
+        row = box.row(align=True)
+        row.prop(s, "refine")
+        row.prop(s, "gap_mm", text="Gap (mm)")
+        op = box.operator("bolus.unfold", icon="MOD_UVPROJECT")
+        op.method, op.refine, op.gap_mm = s.unfold_method, s.refine, s.gap_mm
+        pat = None
+        if obj is not None:
+            pat = obj if PROP_PATTERN_TABLE in obj else bpy.data.objects.get(obj.name + PATTERN_SUFFIX)
+        if pat is not None and PROP_PATTERN_TABLE in pat:
+            try:
+                t = json.loads(pat[PROP_PATTERN_TABLE])
+            except (ValueError, TypeError):
+                t = None
+            if t:
+                box.label(text=f"{pat.name}: EL {t['EL'] * 100:.2f} %  EA {t['EA'] * 100:.2f} %")
+                grid = box.grid_flow(row_major=True, columns=4, even_columns=True, align=True)
+                for head in ("Patch", "EL %", "EA %", "Flips"):
+                    grid.label(text=head)
+                for r in t["islands"]:
+                    for val in (str(r["patch"]), f"{r['EL'] * 100:.2f}", f"{r['EA'] * 100:.2f}", str(r["flipped"])):
+                        grid.label(text=val)
+        box.prop(s, "seam_allowance_mm", text="Seam allowance (mm)")
+        op = box.operator("bolus.export_pattern", icon="EXPORT")
+        op.seam_allowance_mm = s.seam_allowance_mm
 
 
 classes = (VIEW3D_PT_bolus,)

@@ -13,7 +13,7 @@ import os
 
 import bpy
 import numpy as np
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, StringProperty
+from bpy.props import StringProperty
 from mathutils import Matrix
 
 from . import mesh_io
@@ -23,37 +23,12 @@ from .core.pattern_svg import pattern_svg
 from .core.topology import MeshTopology
 from .core.unfold import assemble_pattern, iter_unfold_patches, polygon_errors
 from .operators import ATTR_PATCH, BolusOperator
+from .properties import gap_property, refine_property, seam_allowance_property, unfold_method_property
 
 ATTR_SOURCE_FACE = "bolus_source_face"
 ATTR_AREA_COLOR = "bolus_area_distortion"
 PROP_PATTERN_TABLE = "bolus_pattern_table"
 PATTERN_SUFFIX = "_pattern"
-UNFOLD_METHODS = [
-    ("LBFGS", "L-BFGS", "Minimise the crossed-spring energy with preconditioned L-BFGS, then refine lengths (default)"),
-    ("EXPLICIT", "Explicit", "The seed's explicit mass-spring integration (slower)"),
-]
-
-
-def gap_property(**kw):
-    return FloatProperty(name="Gap", description="Space between the islands of the pattern (mm)", default=10.0,
-                         min=0.0, soft_max=100.0, **kw)
-
-
-def unfold_method_property(**kw):
-    return EnumProperty(name="Method", items=UNFOLD_METHODS, default="LBFGS", **kw)
-
-
-def refine_property(**kw):
-    return BoolProperty(name="Refine lengths", default=True,
-                        description="Finish by minimising the absolute length error EL itself (reweighted least squares)",
-                        **kw)
-
-
-def seam_allowance_property(**kw):
-    return FloatProperty(name="Seam allowance", description="Extra outline offset outward from every cut line (mm); 0 = none",
-                         default=0.0, min=0.0, soft_max=20.0, **kw)
-
-
 class _UnfoldJob:
     """The state of one unfolding: inputs, the patch iterator and the finished patches."""
 

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import EnumProperty, FloatProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
 
 from .core.saliency import DEFAULT_SMOOTHING_MM
 
@@ -58,6 +58,32 @@ def method_property(**kw):
     return EnumProperty(name="Clustering", items=METHOD_ITEMS, default="KMEANS", **kw)
 
 
+UNFOLD_METHODS = [
+    ("LBFGS", "L-BFGS", "Minimise the crossed-spring energy with preconditioned L-BFGS, then refine lengths (default)"),
+    ("EXPLICIT", "Explicit", "The seed's explicit mass-spring integration (slower)"),
+]
+
+
+def gap_property(**kw):
+    return FloatProperty(name="Gap", description="Space between the islands of the pattern (mm)", default=10.0,
+                         min=0.0, soft_max=100.0, **kw)
+
+
+def unfold_method_property(**kw):
+    return EnumProperty(name="Method", items=UNFOLD_METHODS, default="LBFGS", **kw)
+
+
+def refine_property(**kw):
+    return BoolProperty(name="Refine lengths", default=True,
+                        description="Finish by minimising the absolute length error EL itself (reweighted least squares)",
+                        **kw)
+
+
+def seam_allowance_property(**kw):
+    return FloatProperty(name="Seam allowance", description="Extra outline offset outward from every cut line (mm); 0 = none",
+                         default=0.0, min=0.0, soft_max=20.0, **kw)
+
+
 class BolusSettings(bpy.types.PropertyGroup):
     smoothing_mm: smoothing_property()
     color_by: color_by_property()
@@ -65,3 +91,7 @@ class BolusSettings(bpy.types.PropertyGroup):
     eta: eta_property()
     seed: seed_property()
     method: method_property()
+    unfold_method: unfold_method_property()
+    refine: refine_property()
+    gap_mm: gap_property()
+    seam_allowance_mm: seam_allowance_property()

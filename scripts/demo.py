@@ -9,8 +9,10 @@ in a scene where 1 unit = 1 mm, selects the treatment area around the nose in Ed
 
 1. bolus.saliency_preview  -> out/saliency.png
 2. bolus.segment           -> out/patches.png
+3. bolus.unfold            -> out/pattern.png (the flat pattern, coloured by area distortion)
+4. bolus.export_pattern    -> out/pattern.svg (true scale: print at 100 %)
 
-and writes out/demo.blend and the per-patch table (out/report.json, out/report.txt).
+and writes out/demo.blend and the per-patch tables (out/report.json, out/report.txt).
 """
 from __future__ import annotations
 
@@ -35,7 +37,7 @@ def parse_args():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default=str(ROOT / "out"), help="output folder (created)")
     ap.add_argument("--radius", type=float, default=45.0, help="treatment area: faces within this many mm of the nose tip")
-    ap.add_argument("--patches", type=int, default=3)
+    ap.add_argument("--patches", type=int, default=4)
     ap.add_argument("--smoothing", type=float, default=None, help="analysis smoothing in mm (default: the add-on's)")
     ap.add_argument("--resolution", type=int, default=900, help="PNG height in pixels")
     return ap.parse_args(argv)
@@ -64,7 +66,7 @@ def load_example() -> bpy.types.Object:
 
 
 def select_treatment_area(obj: bpy.types.Object, radius_mm: float) -> np.ndarray:
-    """Select (for Edit Mode) the faces whose centre lies within radius_mm of the nose tip."""
+    """Select (for Edit Mode) the forward-facing faces within radius_mm of the nose tip (one connected piece)."""
     me = obj.data
     co = np.empty(len(me.vertices) * 3)
     me.vertices.foreach_get("co", co)
@@ -73,7 +75,10 @@ def select_treatment_area(obj: bpy.types.Object, radius_mm: float) -> np.ndarray
     centres = np.empty(len(me.polygons) * 3)
     me.polygons.foreach_get("center", centres)
     centres = centres.reshape(-1, 3)
-    sel = np.linalg.norm(centres - tip, axis=1) < radius_mm
+    normals = np.empty(len(me.polygons) * 3)
+    me.polygons.foreach_get("normal", normals)
+    # the treatment area: skin facing forward near the nose, not the inside of the nostrils
+    sel = (np.linalg.norm(centres - tip, axis=1) < radius_mm) & (normals.reshape(-1, 3)[:, 1] < -0.1)
     # keep only the connected piece around the tip (the ball may also catch an eyelid)
     from bolus_addon.core.topology import MeshTopology, triangulate_polygons
 
@@ -130,6 +135,31 @@ def render(obj: bpy.types.Object, color_attribute: str, path: Path) -> None:
     bpy.ops.render.render(write_still=True)
 
 
+def render_pattern(face: bpy.types.Object, pattern: bpy.types.Object, path: Path) -> None:
+    """Top view of the pattern alone, coloured by area distortion (blue shrunk, red stretched)."""
+    from bolus_addon.mesh_io import show_colors
+
+    scene = bpy.context.scene
+    face.hide_render = True
+    show_colors(pattern.data, "bolus_area_distortion")
+    co = np.array([v.co for v in pattern.data.vertices])
+    lo, hi = co.min(axis=0), co.max(axis=0)
+    cam = scene.camera
+    old = (tuple(cam.location), tuple(cam.rotation_euler), cam.data.ortho_scale)
+    cam.location = (float((lo[0] + hi[0]) / 2), float((lo[1] + hi[1]) / 2), 500.0)
+    cam.rotation_euler = (0.0, 0.0, 0.0)
+    rx, ry = scene.render.resolution_x, scene.render.resolution_y
+    w, h = float(hi[0] - lo[0]), float(hi[1] - lo[1])
+    # the ortho scale spans the longer side of the image (sensor fit AUTO)
+    cam.data.ortho_scale = (max(w, h * rx / ry) if rx >= ry else max(h, w * ry / rx)) * 1.1
+    scene.display.shading.light = "FLAT"
+    scene.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    scene.display.shading.light = "STUDIO"
+    cam.location, cam.rotation_euler, cam.data.ortho_scale = old
+    face.hide_render = False
+
+
 def run_op(op, **kw) -> float:
     t = time.perf_counter()
     result = op(**kw)
@@ -149,6 +179,10 @@ def main():
     t_sal = run_op(bpy.ops.bolus.saliency_preview, smoothing_mm=smoothing)
     t_seg = run_op(bpy.ops.bolus.segment, patches=args.patches, eta=5.0, seed=0, smoothing_mm=smoothing)
     bpy.ops.object.mode_set(mode="OBJECT")
+    t_unf = run_op(bpy.ops.bolus.unfold)
+    t_svg = run_op(bpy.ops.bolus.export_pattern, filepath=str((out / "pattern.svg").resolve()), seam_allowance_mm=5.0)
+    pattern = bpy.data.objects[obj.name + "_pattern"]
+    pattern_table = json.loads(pattern["bolus_pattern_table"])
 
     table = json.loads(obj["bolus_patch_table"])
     report = {
@@ -158,7 +192,9 @@ def main():
         "sum_varpi": obj["bolus_sum_varpi"],
         "flv": obj["bolus_flv"],
         "segment": table,
-        "seconds": {"saliency_preview": round(t_sal, 3), "segment": round(t_seg, 3)},
+        "pattern": pattern_table,
+        "seconds": {"saliency_preview": round(t_sal, 3), "segment": round(t_seg, 3), "unfold": round(t_unf, 3),
+                    "export_pattern": round(t_svg, 3)},
     }
     (out / "report.json").write_text(json.dumps(report, indent=2))
     lines = [
@@ -172,14 +208,22 @@ def main():
             f"{r['patch']:>5} {r['vertices']:>9} {r['edges']:>7} {r['faces']:>10} {r['area_mm2'] / 100:>9.1f} "
             f"{r['sum_varpi']:>10.4f} {r['flv']:>10.4g}"
         )
+    lines.append(
+        f"Pattern '{pattern.name}': EL {pattern_table['EL'] * 100:.2f} %, EA {pattern_table['EA'] * 100:.2f} %, "
+        f"{pattern_table['flipped']} flipped faces (SPEC measures)"
+    )
+    lines.append(f"{'patch':>5} {'triangles':>10} {'EL %':>7} {'EA %':>7} {'flipped':>8}  cut")
+    for r in pattern_table["islands"]:
+        lines.append(f"{r['patch']:>5} {r['faces']:>10} {r['EL'] * 100:>7.3f} {r['EA'] * 100:>7.3f} {r['flipped']:>8}  {r['cut']}")
     (out / "report.txt").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
     setup_render(obj, args.resolution)
     render(obj, "bolus_saliency_color", out / "saliency.png")
     render(obj, "bolus_patch_color", out / "patches.png")
+    render_pattern(obj, pattern, out / "pattern.png")
     bpy.ops.wm.save_as_mainfile(filepath=str((out / "demo.blend").resolve()))
-    print(f"wrote {out}/demo.blend, saliency.png, patches.png, report.json, report.txt")
+    print(f"wrote {out}/demo.blend, saliency.png, patches.png, pattern.png, pattern.svg, report.json, report.txt")
 
 
 if __name__ == "__main__":
