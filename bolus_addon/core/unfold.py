@@ -79,6 +79,7 @@ __all__ = [
 CONTOUR_WINDOW = 8
 CROSSED_WEIGHT = 3.0
 RELAX_LAYER_ITERS = 20
+AREA_BALANCE = 0.25
 METHODS = ("lbfgs", "explicit")
 STRIPE_DIRECTIONS = 12
 STRIPE_TIES = 3
@@ -144,6 +145,17 @@ class Springs:
     contour_edges: np.ndarray
     contour_rest: np.ndarray
     contour_stiffness: np.ndarray
+
+    def incidence(self, n: int):
+        """Sparse (s,n) matrix B with B @ Q = Q[p] - Q[q] (cached per n)."""
+        cache = self.__dict__.setdefault("_incidence", {})
+        if n not in cache:
+            import scipy.sparse as sp
+
+            s = len(self.ends)
+            rows = np.r_[np.arange(s), np.arange(s)]
+            cache[n] = sp.csr_matrix((np.r_[np.ones(s), -np.ones(s)], (rows, self.ends.T.ravel())), shape=(s, n))
+        return cache[n]
 
 
 def _hinge_distance(V: np.ndarray, i, j, a, b) -> np.ndarray:
@@ -241,8 +253,8 @@ def _boundary_edge_loops(topo: MeshTopology) -> list[np.ndarray]:
 def spring_energy(x: np.ndarray, springs: Springs, n: int) -> tuple[float, np.ndarray]:
     """Total energy (eqs. 3-28, 3-29, plus eq. 4-25) and its gradient (2n,) at x = UV.ravel()."""
     Q = x.reshape(n, 2)
-    p, q = springs.ends[:, 0], springs.ends[:, 1]
-    d = Q[p] - Q[q]
+    B = springs.incidence(n)
+    d = B @ Q  # Q[p] - Q[q] for every spring, as one sparse product
     ell = np.sqrt(np.einsum("ij,ij->i", d, d))
     ell_safe = np.maximum(ell, 1e-300)
     stretch = ell - springs.rest
@@ -256,33 +268,48 @@ def spring_energy(x: np.ndarray, springs: Springs, n: int) -> tuple[float, np.nd
         # each contour window adds c*s*d(ell_e)/dx to the edges it spans
         coef = np.bincount(W.ravel(), np.repeat(springs.contour_stiffness * s, W.shape[1]), minlength=springs.n_tension)
         g[: springs.n_tension] += (coef / ell_safe[: springs.n_tension])[:, None] * d[: springs.n_tension]
-    grad = np.zeros((n, 2))
-    grad[:, 0] = np.bincount(p, g[:, 0], minlength=n) - np.bincount(q, g[:, 0], minlength=n)
-    grad[:, 1] = np.bincount(p, g[:, 1], minlength=n) - np.bincount(q, g[:, 1], minlength=n)
-    return energy, grad.ravel()
+    return energy, np.asarray(B.T @ g).ravel()
 
 
-def _flip_penalty(x: np.ndarray, F: np.ndarray, A0: np.ndarray, weight: float, n: int, frac: float = 0.05):
-    """Quadratic penalty on triangles whose signed area is below frac * A0, and its gradient."""
+def _area_gradient(Q: np.ndarray, F: np.ndarray, coef: np.ndarray, n: int) -> np.ndarray:
+    """sum_t coef_t dA_t/dQ (2n,) for signed areas A_t of triangles F (m,3)."""
+    a, b, c = Q[F[:, 0]], Q[F[:, 1]], Q[F[:, 2]]
+    grad = np.empty((n, 2))
+    gx = np.zeros(n)
+    gy = np.zeros(n)
+    # dA/dv for the corner v of a counter-clockwise triangle (v, p, q) = 0.5 (p_y - q_y, q_x - p_x)
+    for verts, p_, q_ in ((F[:, 0], b, c), (F[:, 1], c, a), (F[:, 2], a, b)):
+        gx += np.bincount(verts, coef * 0.5 * (p_[:, 1] - q_[:, 1]), minlength=n)
+        gy += np.bincount(verts, coef * 0.5 * (q_[:, 0] - p_[:, 0]), minlength=n)
+    grad[:, 0], grad[:, 1] = gx, gy
+    return grad.ravel()
+
+
+def area_terms(x: np.ndarray, F: np.ndarray, A0: np.ndarray, n: int, flip_weight: float = 0.0,
+               area_weights: np.ndarray | None = None, frac: float = 0.05) -> tuple[float, np.ndarray]:
+    """Energy terms on the signed areas A_t of the triangles, and their gradient (2n,).
+
+    flip penalty (overlap correction, 4.5.3): 1/2 w sum max(0, frac A0 - A)^2 / mean(A0),
+    zero until a triangle is about to turn over;
+    area springs (length refinement): 1/2 sum a_t (A_t - A0_t)^2.
+    """
     Q = x.reshape(n, 2)
-    A = signed_areas(Q, F)
-    short = np.maximum(frac * A0 - A, 0.0)
-    act = short > 0
-    if not act.any():
-        return 0.0, np.zeros(2 * n)
-    e = 0.5 * weight * float(np.dot(short[act], short[act]) / np.mean(A0))
-    coef = -weight * short[act] / np.mean(A0)  # dE/dA
-    Fa = F[act]
-    a, b, c = Q[Fa[:, 0]], Q[Fa[:, 1]], Q[Fa[:, 2]]
-    # dA/da = 0.5 * perp(c - b) with perp(x, y) = (y, -x) ... for CCW positive area
-    da = 0.5 * np.stack([b[:, 1] - c[:, 1], c[:, 0] - b[:, 0]], axis=1)
-    db = 0.5 * np.stack([c[:, 1] - a[:, 1], a[:, 0] - c[:, 0]], axis=1)
-    dc = 0.5 * np.stack([a[:, 1] - b[:, 1], b[:, 0] - a[:, 0]], axis=1)
-    grad = np.zeros((n, 2))
-    for verts, dd in ((Fa[:, 0], da), (Fa[:, 1], db), (Fa[:, 2], dc)):
-        grad[:, 0] += np.bincount(verts, coef * dd[:, 0], minlength=n)
-        grad[:, 1] += np.bincount(verts, coef * dd[:, 1], minlength=n)
-    return e, grad.ravel()
+    a, b, c = Q[F[:, 0]], Q[F[:, 1]], Q[F[:, 2]]
+    A = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    e = 0.0
+    coef = np.zeros(len(F))
+    if flip_weight > 0:
+        short = np.maximum(frac * A0 - A, 0.0)
+        mA = float(np.mean(A0))
+        e += 0.5 * flip_weight * float(np.dot(short, short)) / mA
+        coef -= flip_weight * short / mA
+    if area_weights is not None:
+        r = A - A0
+        e += 0.5 * float(np.dot(area_weights, r * r))
+        coef += area_weights * r
+    if not coef.any():
+        return e, np.zeros(2 * n)
+    return e, _area_gradient(Q, F, coef, n)
 
 
 # --------------------------------------------------------------------------- minimisers
@@ -299,7 +326,7 @@ def stiffness_laplacian(springs: Springs, n: int):
 
 def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, F=None, A0=None,
                 flip_weight: float = 0.0, callback=None, memory: int = 12,
-                precondition: bool = True) -> tuple[np.ndarray, int, float]:
+                precondition: bool = True, area_weights=None) -> tuple[np.ndarray, int, float]:
     """Minimise the spring energy with L-BFGS (two-loop recursion) from UV0 (n,2).
 
     The initial inverse Hessian of the recursion is gamma K^-1, K the springs' Hessian
@@ -317,8 +344,8 @@ def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, 
 
     def fun(x):
         e, g = spring_energy(x.ravel(), springs, n)
-        if flip_weight > 0:
-            e2, g2 = _flip_penalty(x.ravel(), F, A0, flip_weight, n)
+        if flip_weight > 0 or area_weights is not None:
+            e2, g2 = area_terms(x.ravel(), F, A0, n, flip_weight, area_weights)
             e, g = e + e2, g + g2
         return e, g.reshape(n, 2)
 
@@ -728,7 +755,8 @@ def conformal_unfolding(topo: MeshTopology) -> np.ndarray:
 
 # --------------------------------------------------------------------------- L1 refinement
 def refine_lengths_l1(UV, springs: Springs, face_count: np.ndarray, rounds: int = 3,
-                      crossed_weight: float = 0.0, max_iter: int = 60, F=None, A0=None) -> tuple[np.ndarray, int]:
+                      crossed_weight: float = 0.0, max_iter: int = 30, F=None, A0=None,
+                      area_balance: float = AREA_BALANCE) -> tuple[np.ndarray, int]:
     """Iteratively reweighted least squares towards min sum kappa_e |l_e - D_e| (the numerator of EL).
 
     Our addition after the spring relaxation: the spring energy is a sum of squares,
@@ -750,8 +778,15 @@ def refine_lengths_l1(UV, springs: Springs, face_count: np.ndarray, rounds: int 
         w *= np.median(springs.stiffness[:nt]) / np.median(w)
         sp_.stiffness[:nt] = w
         sp_.stiffness[nt:] = springs.stiffness[nt:] * crossed_weight
+        aw = None
+        if area_balance > 0 and F is not None:
+            # IRLS weights for sum |A - A0| too, scaled so that EL and EA count alike
+            ra = np.abs(signed_areas(X, F) - A0)
+            aw = 1.0 / np.maximum(ra, 1e-3 * A0)
+            lam = area_balance * springs.rest[:nt].dot(face_count) / A0.sum()
+            aw *= lam * np.median(w) / np.median(face_count / np.maximum(res, 1e-3 * springs.rest[:nt]))
         X, it, _ = relax_lbfgs(X, sp_, max_iter=max_iter, tol=1e-6, F=F, A0=A0,
-                               flip_weight=FLIP_WEIGHT if F is not None else 0.0)
+                               flip_weight=FLIP_WEIGHT if F is not None else 0.0, area_weights=aw)
         its += it
     return X, its
 
