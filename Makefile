@@ -33,6 +33,7 @@ test-core: $(VENV)/.installed
 
 bench: $(VENV)/.installed
 	$(PY) bench/segment_bench.py
+	$(PY) bench/unfold_bench.py
 
 clean:
 	rm -rf out .pytest_cache
