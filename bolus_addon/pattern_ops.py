@@ -109,8 +109,9 @@ def build_pattern_object(context, job: _UnfoldJob) -> bpy.types.Object:
     pos = np.searchsorted(ukey, corner_poly * nv + corner_src)
     corner_pat = lookup[pos]
     scale = region.mm_per_unit
-    verts = np.zeros((len(pattern.UV), 3))
+    verts = np.zeros((len(pattern.UV), 3), dtype=np.float32)  # what the mesh will store
     verts[:, :2] = pattern.UV / scale
+    pattern.UV = verts[:, :2].astype(np.float64) * scale  # report the errors of the stored pattern
     poly_sizes = sizes[polys]
     name = src.name + PATTERN_SUFFIX
     me = bpy.data.meshes.new(name)

@@ -855,12 +855,19 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     if len(F) < 3:
-        raise BolusError(f"a patch of {len(F)} faces is too small to unfold (at least 3 are needed)")
+        raise BolusError(f"a patch of {len(F)} triangles is too small to unfold (at least 3 are needed)")
     if method not in METHODS:
         raise BolusError(f"unknown unfolding method {method!r}; use one of {', '.join(METHODS)}")
     topo0 = MeshTopology(V, F)
     if float(topo0.areas.sum()) <= 0 or topo0.degenerate_faces().all():
         raise BolusError("the patch has no area to unfold")
+    # consistent winding: every interior edge is walked once in each direction
+    he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
+    if len(np.unique(he[:, 0] * topo0.n + he[:, 1])) < len(he):
+        raise BolusError(
+            "the patch's faces are not consistently oriented (some normals point the other way): "
+            "recalculate the normals first (Mesh > Normals > Recalculate Outside)"
+        )
     cut = cut_to_disk(V, F)
     topo = MeshTopology(cut.V, cut.F)
     report(0.05, "initial unfolding")
@@ -939,7 +946,10 @@ def iter_unfold_patches(V, F, labels, method: str = "lbfgs", refine_rounds: int 
         sel = labels == p
         Fs = F[sel]
         verts, inv = np.unique(Fs.ravel(), return_inverse=True)
-        u = unfold_patch(V[verts], inv.reshape(-1, 3), method=method, refine_rounds=refine_rounds)
+        try:
+            u = unfold_patch(V[verts], inv.reshape(-1, 3), method=method, refine_rounds=refine_rounds)
+        except BolusError as exc:
+            raise BolusError(f"patch {p}: {exc}") from exc
         u.vert_origin = verts[u.vert_origin]  # back to the caller's vertex indices
         yield k, len(ids), u
 
