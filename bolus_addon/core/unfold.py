@@ -54,7 +54,7 @@ from scipy.sparse.csgraph import dijkstra
 from .cutting import cut_to_disk
 from .errors import BolusError
 from .layout import pack_islands
-from .overlap import boundary_self_intersections, overlapping_faces, signed_areas
+from .overlap import boundary_edge_array, boundary_self_intersections, overlapping_faces, signed_areas
 from .topology import MeshTopology
 
 __all__ = [
@@ -80,6 +80,7 @@ CONTOUR_WINDOW = 8
 CROSSED_WEIGHT = 3.0
 RELAX_LAYER_ITERS = 10
 AREA_BALANCE = 0.25
+OUTLINE_WEIGHT = 10.0
 METHODS = ("lbfgs", "explicit")
 STRIPE_DIRECTIONS = 12
 STRIPE_TIES = 3
@@ -326,7 +327,7 @@ def stiffness_laplacian(springs: Springs, n: int):
 
 def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, F=None, A0=None,
                 flip_weight: float = 0.0, callback=None, memory: int = 12,
-                precondition: bool = True, area_weights=None) -> tuple[np.ndarray, int, float]:
+                precondition: bool = True, area_weights=None, extra=None) -> tuple[np.ndarray, int, float]:
     """Minimise the spring energy with L-BFGS (two-loop recursion) from UV0 (n,2).
 
     The initial inverse Hessian of the recursion is gamma K^-1, K the springs' Hessian
@@ -347,6 +348,9 @@ def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, 
         if flip_weight > 0 or area_weights is not None:
             e2, g2 = area_terms(x.ravel(), F, A0, n, flip_weight, area_weights)
             e, g = e + e2, g + g2
+        if extra is not None:
+            e3, g3 = extra(x.ravel())
+            e, g = e + e3, g + g3
         return e, g.reshape(n, 2)
 
     if precondition:
@@ -756,7 +760,7 @@ def conformal_unfolding(topo: MeshTopology) -> np.ndarray:
 # --------------------------------------------------------------------------- L1 refinement
 def refine_lengths_l1(UV, springs: Springs, face_count: np.ndarray, rounds: int = 3,
                       crossed_weight: float = 0.0, max_iter: int = 30, F=None, A0=None,
-                      area_balance: float = AREA_BALANCE) -> tuple[np.ndarray, int]:
+                      area_balance: float = AREA_BALANCE, extra=None) -> tuple[np.ndarray, int]:
     """Iteratively reweighted least squares towards min sum kappa_e |l_e - D_e| (the numerator of EL).
 
     Our addition after the spring relaxation: the spring energy is a sum of squares,
@@ -786,7 +790,7 @@ def refine_lengths_l1(UV, springs: Springs, face_count: np.ndarray, rounds: int 
             lam = area_balance * springs.rest[:nt].dot(face_count) / A0.sum()
             aw *= lam * np.median(w) / np.median(face_count / np.maximum(res, 1e-3 * springs.rest[:nt]))
         X, it, _ = relax_lbfgs(X, sp_, max_iter=max_iter, tol=1e-6, F=F, A0=A0,
-                               flip_weight=FLIP_WEIGHT if F is not None else 0.0, area_weights=aw)
+                               flip_weight=FLIP_WEIGHT if F is not None else 0.0, area_weights=aw, extra=extra)
         its += it
     return X, its
 
@@ -808,6 +812,78 @@ def _correct_flips(UV, springs: Springs, topo: MeshTopology, rounds: int = 4, ma
         flipped = int(np.count_nonzero(signed_areas(UV, topo.F) <= 0))
         weight *= 10.0
     return UV, its, flipped
+
+
+def outline_term(verts: np.ndarray, edges: np.ndarray, lengths: np.ndarray, n: int, weight: float, margin: float):
+    """Penalty pushing outline vertices out of the pattern across outline edges (4.5.3).
+
+    For every (vertex v, boundary edge c->d with the pattern on its left) pair,
+    s = (d - c) x (v - c) / L is v's distance to the left of the edge's line;
+    energy 1/2 w max(0, s + margin)^2: the seed's "spring along the intersected edge"
+    that moves a wrongly placed vertex back out.  Returns f(x) -> (energy, grad (2n,)).
+    """
+    def f(x):
+        Q = x.reshape(n, 2)
+        v, c, d = Q[verts], Q[edges[:, 0]], Q[edges[:, 1]]
+        e, r = d - c, v - c
+        s = (e[:, 0] * r[:, 1] - e[:, 1] * r[:, 0]) / lengths
+        viol = np.maximum(s + margin, 0.0)
+        coef = weight * viol / lengths  # dE/d(cross product)
+        gv = np.stack([-e[:, 1], e[:, 0]], 1) * coef[:, None]
+        gd = np.stack([r[:, 1], -r[:, 0]], 1) * coef[:, None]
+        gc = -gv - gd
+        grad = np.zeros((n, 2))
+        for idx, gg in ((verts, gv), (edges[:, 1], gd), (edges[:, 0], gc)):
+            grad[:, 0] += np.bincount(idx, gg[:, 0], minlength=n)
+            grad[:, 1] += np.bincount(idx, gg[:, 1], minlength=n)
+        return 0.5 * weight * float(np.dot(viol, viol)), grad.ravel()
+
+    return f
+
+
+def _defects(UV, F) -> tuple[int, int]:
+    """(flipped triangles, overlapping triangles) of a pattern: lower is better."""
+    return int(np.count_nonzero(signed_areas(UV, F) <= 0)), int(overlapping_faces(UV, F).sum())
+
+
+def _correct_outline(UV, springs: Springs, topo: MeshTopology, rounds: int = 8, max_iter: int = 300):
+    """Overlap correction of the outline (4.5.3, first method): where boundary edges cross,
+    the vertex of one that lies inside the pattern is pushed back out across the other,
+    with the flip penalty raised so that no triangle turns over on the way.  Constraints
+    found in earlier rounds are kept.  Returns (UV, iterations, crossings left, the last
+    penalty term, to keep the outline apart in later steps)."""
+    E = boundary_edge_array(topo.F)
+    mean_len = float(topo.edge_lengths.mean())
+    cons: set[tuple[int, int]] = set()
+    its = 0
+    pairs = boundary_self_intersections(UV, topo.F)
+    weight = float(np.median(springs.stiffness)) * OUTLINE_WEIGHT
+    flip_w = FLIP_WEIGHT * 100.0
+    term = None
+    for _ in range(rounds):
+        flips = int(np.count_nonzero(signed_areas(UV, topo.F) <= 0))
+        if len(pairs) == 0 and flips == 0:
+            break
+        if flips:
+            flip_w *= 10.0
+        for i, j in pairs.tolist():
+            for a, b in ((i, j), (j, i)):
+                for v in E[a]:
+                    if v not in E[b]:
+                        cons.add((int(v), int(b)))
+        if not cons:
+            break
+        cv = np.array([c[0] for c in cons], dtype=np.int64)
+        ce = E[np.array([c[1] for c in cons], dtype=np.int64)]
+        L = np.maximum(np.linalg.norm(UV[ce[:, 1]] - UV[ce[:, 0]], axis=1), 1e-9 * mean_len)
+        term = outline_term(cv, ce, L, topo.n, weight=weight, margin=0.01 * mean_len)
+        UV, it, _ = relax_lbfgs(UV, springs, max_iter=max_iter, F=topo.F, A0=topo.areas,
+                                flip_weight=flip_w, extra=term)
+        its += it
+        pairs = boundary_self_intersections(UV, topo.F)
+        if len(pairs):
+            weight *= 2.0
+    return UV, its, len(pairs), term
 
 
 # --------------------------------------------------------------------------- pipeline
@@ -906,6 +982,20 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         it += it2
         UV, it2, flipped = _correct_flips(UV, springs, topo)
         it += it2
+    if len(boundary_self_intersections(UV, topo.F)):
+        report(0.9, "outline overlap correction")
+        UV2, it2, crossings2, term = _correct_outline(UV, springs, topo)
+        it += it2
+        if refine_rounds > 0 and term is not None:
+            # the correction relaxed the plain spring energy: refine again, outline kept apart
+            UV3, it3 = refine_lengths_l1(UV2, springs, topo.edge_face_count.astype(np.float64),
+                                         rounds=refine_rounds, F=topo.F, A0=topo.areas, extra=term)
+            it += it3
+            if _defects(UV3, topo.F) <= _defects(UV2, topo.F):
+                UV2 = UV3
+        if _defects(UV2, topo.F) <= _defects(UV, topo.F):
+            UV = UV2
+            flipped = int(np.count_nonzero(signed_areas(UV, topo.F) <= 0))
     e, _ = spring_energy(UV.ravel(), springs, topo.n)
     if flipped:
         warnings.append(f"{flipped} triangles remain flipped after the overlap correction")
