@@ -759,7 +759,7 @@ def conformal_unfolding(topo: MeshTopology) -> np.ndarray:
 
 # --------------------------------------------------------------------------- L1 refinement
 def refine_lengths_l1(UV, springs: Springs, face_count: np.ndarray, rounds: int = 3,
-                      crossed_weight: float = 0.0, max_iter: int = 30, F=None, A0=None,
+                      crossed_weight: float = 0.0, max_iter: int = 20, F=None, A0=None,
                       area_balance: float = AREA_BALANCE, extra=None) -> tuple[np.ndarray, int]:
     """Iteratively reweighted least squares towards min sum kappa_e |l_e - D_e| (the numerator of EL).
 
