@@ -86,42 +86,7 @@ MIN_STRETCH_VERSION = (4, 3, 0)
 # ----------------------------------------------------------------------------- helpers
 
 
-@contextlib.contextmanager
-def captured_output(enabled: bool = True):
-    """Redirect the process's stdout/stderr (fds 1, 2) to a temp file; yields a text getter."""
-    if not enabled:
-        yield lambda: ""
-        return
-    sys.stdout.flush()
-    sys.stderr.flush()
-    tmp = tempfile.TemporaryFile(mode="w+b")
-    saved = os.dup(1), os.dup(2)
-    os.dup2(tmp.fileno(), 1)
-    os.dup2(tmp.fileno(), 2)
-
-    def text() -> str:
-        tmp.seek(0)
-        return tmp.read().decode("utf-8", "replace")
-
-    try:
-        yield text
-    finally:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os.dup2(saved[0], 1)
-        os.dup2(saved[1], 2)
-        os.close(saved[0])
-        os.close(saved[1])
-
-
-def clean_scene(bpy) -> None:
-    if bpy.context.object is not None and bpy.context.object.mode != "OBJECT":
-        bpy.ops.object.mode_set(mode="OBJECT")
-    for ob in list(bpy.data.objects):
-        bpy.data.objects.remove(ob, do_unlink=True)
-    for me in list(bpy.data.meshes):
-        bpy.data.meshes.remove(me)
-    gc.collect()
+from benchutil import captured_output, clean_scene  # noqa: E402
 
 
 def submesh(V, F, sel):
