@@ -846,7 +846,7 @@ def _defects(UV, F) -> tuple[int, int]:
     return int(np.count_nonzero(signed_areas(UV, F) <= 0)), int(overlapping_faces(UV, F).sum())
 
 
-def _correct_outline(UV, springs: Springs, topo: MeshTopology, rounds: int = 8, max_iter: int = 300):
+def _correct_outline(UV, springs: Springs, topo: MeshTopology, rounds: int = 16, max_iter: int = 300):
     """Overlap correction of the outline (4.5.3, first method): where boundary edges cross,
     the vertex of one that lies inside the pattern is pushed back out across the other,
     with the flip penalty raised so that no triangle turns over on the way.  Constraints
