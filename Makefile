@@ -1,6 +1,7 @@
 # make demo  - run the main job on the built-in example and write out/
 # make test  - the whole test suite (core, Blender 5.0 and a Blender 4.2 LTS smoke subset)
 # make bench - benchmarks (printed, not asserted)
+# make extension - the installable extension zip in dist/ (Blender's own builder, from bpy)
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV   := .venv
 VENV42 := .venv42
@@ -8,7 +9,7 @@ BPY_LTS := 4.2.0
 PY     := $(VENV)/bin/python
 PY42   := $(VENV42)/bin/python
 
-.PHONY: demo test test-core test-blender test-lts bench clean
+.PHONY: demo test test-core bench extension clean
 
 $(VENV)/.installed: requirements.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -35,5 +36,9 @@ bench: $(VENV)/.installed
 	$(PY) bench/segment_bench.py
 	$(PY) bench/unfold_bench.py
 
+extension: $(VENV)/.installed
+	mkdir -p dist
+	$(PY) -c "import bpy, os, subprocess, sys; cli = os.path.join(bpy.utils.system_resource('SCRIPTS'), 'addons_core', 'bl_pkg', 'cli', 'blender_ext.py'); sys.exit(subprocess.call([sys.executable, cli, 'build', '--source-dir', '.', '--output-dir', 'dist']))"
+
 clean:
-	rm -rf out .pytest_cache
+	rm -rf out dist .pytest_cache
