@@ -2,6 +2,7 @@
 # make test  - the whole test suite (core, Blender 5.0 and a Blender 4.2 LTS smoke subset)
 # make bench - benchmarks (printed, not asserted)
 # make extension - the installable extension zip in dist/ (Blender's own builder, from bpy)
+# make extension-wheels - one zip per platform in dist/, with scipy and scikit-learn inside
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV   := .venv
 VENV42 := .venv42
@@ -9,7 +10,7 @@ BPY_LTS := 4.2.0
 PY     := $(VENV)/bin/python
 PY42   := $(VENV42)/bin/python
 
-.PHONY: demo test test-core bench extension clean
+.PHONY: demo test test-core bench extension extension-wheels clean
 
 $(VENV)/.installed: requirements.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -40,5 +41,8 @@ extension: $(VENV)/.installed
 	mkdir -p dist
 	$(PY) -c "import bpy, os, subprocess, sys; cli = os.path.join(bpy.utils.system_resource('SCRIPTS'), 'addons_core', 'bl_pkg', 'cli', 'blender_ext.py'); sys.exit(subprocess.call([sys.executable, cli, 'build', '--source-dir', '.', '--output-dir', 'dist']))"
 
+extension-wheels: $(VENV)/.installed
+	$(PY) scripts/build_extension.py --out dist
+
 clean:
-	rm -rf out dist .pytest_cache
+	rm -rf out dist build .pytest_cache
