@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import traceback
 
 import bpy
 import numpy as np
@@ -21,7 +22,7 @@ from .core.colormap import diverging_linear_rgba
 from .core.errors import BolusError
 from .core.pattern_svg import pattern_svg
 from .core.topology import MeshTopology
-from .core.unfold import assemble_pattern, iter_unfold_patches, polygon_errors
+from .core.unfold import assemble_pattern, iter_unfold_patches, polygon_area_error, polygon_errors
 from .operators import ATTR_PATCH, BolusOperator
 from .properties import gap_property, refine_property, seam_allowance_property, unfold_method_property
 
@@ -133,15 +134,7 @@ def build_pattern_object(context, job: _UnfoldJob) -> bpy.types.Object:
     errors = polygon_errors(V_src_mm, corner_src, pattern.UV, corner_pat, poly_sizes, groups=patch_of_poly)
     mesh_io.write_attribute(me, ATTR_SOURCE_FACE, "INT", "FACE", polys)
     mesh_io.write_attribute(me, ATTR_PATCH, "INT", "FACE", patch_of_poly)
-    # area distortion per polygon: A / A0 - 1
-    from .core.topology import triangulate_polygons
-
-    Fs, tp = triangulate_polygons(corner_src, poly_sizes)
-    Fp, _ = triangulate_polygons(corner_pat, poly_sizes)
-    a0 = np.bincount(tp, 0.5 * np.linalg.norm(np.cross(V_src_mm[Fs[:, 1]] - V_src_mm[Fs[:, 0]], V_src_mm[Fs[:, 2]] - V_src_mm[Fs[:, 0]]), axis=1), minlength=len(polys))
-    P = pattern.UV
-    a = np.bincount(tp, 0.5 * ((P[Fp[:, 1], 0] - P[Fp[:, 0], 0]) * (P[Fp[:, 2], 1] - P[Fp[:, 0], 1]) - (P[Fp[:, 1], 1] - P[Fp[:, 0], 1]) * (P[Fp[:, 2], 0] - P[Fp[:, 0], 0])), minlength=len(polys))
-    distortion = a / np.maximum(a0, 1e-300) - 1.0
+    distortion = polygon_area_error(V_src_mm, corner_src, pattern.UV, corner_pat, poly_sizes)
     mesh_io.write_attribute(me, "bolus_area_error", "FLOAT", "FACE", distortion)
     mesh_io.write_face_colors(me, ATTR_AREA_COLOR, diverging_linear_rgba(distortion, 0.1))
     obj = bpy.data.objects.get(name)
@@ -242,8 +235,6 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         except Exception as exc:  # never a traceback at the user
-            import traceback
-
             traceback.print_exc()
             self._end(wm)
             self.report({"ERROR"}, f"Unexpected error, nothing was created ({type(exc).__name__}: {exc})")

@@ -74,6 +74,7 @@ __all__ = [
     "Pattern",
     "length_area_errors",
     "polygon_errors",
+    "polygon_area_error",
 ]
 
 CONTOUR_WINDOW = 8
@@ -100,6 +101,20 @@ def length_area_errors(V: np.ndarray, F: np.ndarray, UV: np.ndarray) -> tuple[fl
     return float(np.abs(L - L0).sum() / L0.sum()), float(np.abs(A - A0).sum() / A0.sum())
 
 
+def _fanned(V_src, corners_src, V_pat, corners_pat, sizes):
+    """Matching polygons fanned from their first corner: (tri_poly (t,), L0 (t,3), L (t,3), A0 (t,), A (t,))."""
+    from .topology import triangulate_polygons
+
+    Fs, tri_poly = triangulate_polygons(corners_src, sizes)
+    Fp, _ = triangulate_polygons(corners_pat, sizes)
+    V_src = np.asarray(V_src, dtype=np.float64)
+    P = np.asarray(V_pat, dtype=np.float64)[:, :2]
+    L0 = np.stack([np.linalg.norm(V_src[Fs[:, k]] - V_src[Fs[:, (k + 1) % 3]], axis=1) for k in range(3)], 1)
+    L = np.stack([np.linalg.norm(P[Fp[:, k]] - P[Fp[:, (k + 1) % 3]], axis=1) for k in range(3)], 1)
+    A0 = 0.5 * np.linalg.norm(np.cross(V_src[Fs[:, 1]] - V_src[Fs[:, 0]], V_src[Fs[:, 2]] - V_src[Fs[:, 0]]), axis=1)
+    return tri_poly, L0, L, A0, signed_areas(P, Fp)
+
+
 def polygon_errors(V_src: np.ndarray, corners_src: np.ndarray, V_pat: np.ndarray, corners_pat: np.ndarray,
                    sizes: np.ndarray, groups: np.ndarray | None = None) -> dict:
     """EL and EA exactly as SPEC measures a pattern against its source, per group.
@@ -109,15 +124,7 @@ def polygon_errors(V_src: np.ndarray, corners_src: np.ndarray, V_pat: np.ndarray
     from its first corner; groups (p,) optional labels (e.g. patches).
     Returns {group: (EL, EA, flipped)} and the key None for all polygons together.
     """
-    from .topology import triangulate_polygons
-
-    Fs, tri_poly = triangulate_polygons(corners_src, sizes)
-    Fp, _ = triangulate_polygons(corners_pat, sizes)
-    P = np.asarray(V_pat, dtype=np.float64)[:, :2]
-    L0 = np.stack([np.linalg.norm(V_src[Fs[:, k]] - V_src[Fs[:, (k + 1) % 3]], axis=1) for k in range(3)], 1)
-    L = np.stack([np.linalg.norm(P[Fp[:, k]] - P[Fp[:, (k + 1) % 3]], axis=1) for k in range(3)], 1)
-    A0 = 0.5 * np.linalg.norm(np.cross(V_src[Fs[:, 1]] - V_src[Fs[:, 0]], V_src[Fs[:, 2]] - V_src[Fs[:, 0]]), axis=1)
-    A = signed_areas(P, Fp)
+    tri_poly, L0, L, A0, A = _fanned(V_src, corners_src, V_pat, corners_pat, sizes)
     out = {}
     g = np.zeros(len(sizes), dtype=np.int64) if groups is None else np.asarray(groups)
     tg = g[tri_poly]
@@ -127,6 +134,13 @@ def polygon_errors(V_src: np.ndarray, corners_src: np.ndarray, V_pat: np.ndarray
         ea = float(np.abs(A[sel] - A0[sel]).sum() / A0[sel].sum())
         out[key] = (el, ea, int(np.count_nonzero(A[sel] <= 0)))
     return out
+
+
+def polygon_area_error(V_src, corners_src, V_pat, corners_pat, sizes) -> np.ndarray:
+    """A / A0 - 1 (p,) of every pattern polygon against its source polygon (signed area)."""
+    tri_poly, _, _, A0, A = _fanned(V_src, corners_src, V_pat, corners_pat, sizes)
+    a0 = np.bincount(tri_poly, A0, minlength=len(sizes))
+    return np.bincount(tri_poly, A, minlength=len(sizes)) / np.maximum(a0, 1e-300) - 1.0
 
 
 # --------------------------------------------------------------------------- springs
