@@ -13,7 +13,15 @@ import re
 
 import numpy as np
 import pytest
-from conftest import ASSETS, attr_array, import_obj, load_extension_package, make_object, mesh_snapshot
+from conftest import (
+    ASSETS,
+    attr_array,
+    enter_edit_mode_with_faces,
+    import_obj,
+    load_extension_package,
+    make_object,
+    mesh_snapshot,
+)
 
 pytestmark = pytest.mark.blender
 
@@ -162,28 +170,6 @@ def bfs_faces(me, start: int, count: int) -> np.ndarray:
     mask = np.zeros(len(me.polygons), dtype=bool)
     mask[list(seen)] = True
     return mask
-
-
-def enter_edit_mode_with_faces(bpy, ob, mask: np.ndarray) -> None:
-    """Select the polygons in `mask` (and their vertices) in Object Mode, then enter Edit Mode.
-
-    (Edge selection is left alone: writing MeshEdge.select crashes bpy 5.0.1.)
-    """
-    me = ob.data
-    vsel = np.zeros(len(me.vertices), dtype=bool)
-    for p in me.polygons:
-        if mask[p.index]:
-            vsel[list(p.vertices)] = True
-    me.vertices.foreach_set("select", vsel)
-    me.polygons.foreach_set("select", np.asarray(mask, dtype=bool))
-    bpy.context.tool_settings.mesh_select_mode = (False, False, True)
-    bpy.ops.object.mode_set(mode="EDIT")
-    import bmesh
-
-    bm = bmesh.from_edit_mesh(me)
-    bm.faces.ensure_lookup_table()
-    got = np.array([f.select for f in bm.faces])
-    assert np.array_equal(got, mask), "test setup: the Edit Mode selection is not the one asked"
 
 
 # ------------------------------------------------------------------ registration

@@ -21,7 +21,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
-from conftest import ASSETS, attr_array, import_obj, make_object, mesh_snapshot
+from conftest import ASSETS, attr_array, enter_edit_mode_with_faces, import_obj, make_object, mesh_snapshot
 from meshgen import cone_piece, cylinder_piece, spherical_cap
 
 from bolus_addon.core.pattern_svg import svg_outline_paths
@@ -371,18 +371,6 @@ def test_sixty_degree_cap_has_no_flipped_triangles(bpy_addon, scene):
 
 
 # =========================================================================== 4. source faces
-def _select_region(bpy, ob, mask):
-    me = ob.data
-    vsel = np.zeros(len(me.vertices), dtype=bool)
-    for p in me.polygons:
-        if mask[p.index]:
-            vsel[list(p.vertices)] = True
-    me.vertices.foreach_set("select", vsel)
-    me.polygons.foreach_set("select", np.asarray(mask, dtype=bool))
-    bpy.context.tool_settings.mesh_select_mode = (False, False, True)
-    bpy.ops.object.mode_set(mode="EDIT")
-
-
 SOURCE_CASES = [
     pytest.param("cone", False, id="cone_quads"),
     pytest.param("cone", True, id="cone_quads_selection"),
@@ -407,7 +395,7 @@ def test_source_faces_map_back(bpy_addon, scene, kind, selection):
         centre = np.array([p.center[:] for p in src.data.polygons])
         region = centre[:, 2] < 30.0
         assert 0 < region.sum() < npoly
-        _select_region(bpy, src, region)
+        enter_edit_mode_with_faces(bpy, src, region)
     assert bpy.ops.bolus.unfold() == {"FINISHED"}
     if selection:
         assert src.mode == "EDIT", "the operator leaves the user in Edit Mode"
