@@ -352,6 +352,15 @@ def cut_to_disk(V, F) -> CutResult:
         )
 
     paths_in, lengths, parts = [], [], []
+
+    def cut_along(path, t, text):
+        """Open the current mesh along ``path`` (its vertex ids); record it in input ids."""
+        Fn, vo = split_along_edges(Fc, np.stack([path[:-1], path[1:]], 1), t)
+        p_in = origin[path]  # the first copies keep their ids, so path means the same before and after
+        paths_in.append(p_in)
+        lengths.append(_path_length(V, p_in))
+        parts.append(text.format(lengths[-1], int(p_in[0]), int(p_in[-1])))
+        return Fn, origin[vo]
     if st["boundary_loops"] == 0:
         # closed genus-0 surface: a double sweep finds two vertices far apart
         t = MeshTopology(Vc, Fc)
@@ -364,13 +373,7 @@ def cut_to_disk(V, F) -> CutResult:
         if len(path) < 3:  # at least two edges, or the cut would not open anything
             nb = t.one_ring_vertices(int(path[-1]))
             path = np.r_[path, nb[nb != path[0]][0]]
-        Fc, vo = split_along_edges(Fc, np.stack([path[:-1], path[1:]], 1), t)
-        origin = origin[vo]
-        p_in = origin[path]
-        paths_in.append(p_in)
-        lengths.append(_path_length(V, p_in))
-        parts.append(f"the surface is closed: cut along a {lengths[-1]:.1f} mm path between vertices "
-                     f"{int(p_in[0])} and {int(p_in[-1])}")
+        Fc, origin = cut_along(path, t, "the surface is closed: cut along a {:.1f} mm path between vertices {} and {}")
         Vc = V[origin]
 
     while True:
@@ -388,14 +391,8 @@ def cut_to_disk(V, F) -> CutResult:
                              "segment it into more patches")
         target = int(others[np.argmin(d)])
         path = _path_from(pred, target)  # inner loop vertex ... outer loop vertex
-        Fc, vo = split_along_edges(Fc, np.stack([path[:-1], path[1:]], 1), t)
-        p_in = origin[path]
-        origin = origin[vo]
+        Fc, origin = cut_along(path, t, "cut along a {:.1f} mm path joining the boundary loops at vertices {} and {}")
         Vc = V[origin]
-        paths_in.append(p_in)
-        lengths.append(_path_length(V, p_in))
-        parts.append(f"cut along a {lengths[-1]:.1f} mm path joining the boundary loops at vertices "
-                     f"{int(p_in[0])} and {int(p_in[-1])}")
 
     check = surface_type(Vc, Fc)
     if not check["is_disk"]:
