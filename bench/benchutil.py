@@ -3,10 +3,13 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import json
 import os
+import platform
 import resource
 import sys
 import tempfile
+from pathlib import Path
 
 
 @contextlib.contextmanager
@@ -76,3 +79,18 @@ def clean_scene(bpy) -> None:
         if mat.users == 0:
             bpy.data.materials.remove(mat)
     gc.collect()
+
+
+def write_json(path, payload: dict) -> None:
+    """Write the figures with the versions and the machine they were measured on."""
+    import bpy
+    import numpy
+    import scipy
+    import sklearn
+
+    env = {"bpy": bpy.app.version_string, "python": platform.python_version(), "numpy": numpy.__version__,
+           "scipy": scipy.__version__, "sklearn": sklearn.__version__, "cpus": os.cpu_count()}
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({**env, **payload}, indent=2, default=float))
+    print(f"figures written to {out}")

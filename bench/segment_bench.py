@@ -27,14 +27,11 @@ see its README for sources, licences and units.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import gc
 import json
 import os
 import platform
-import resource
 import sys
-import tempfile
 import time
 import tracemalloc
 from pathlib import Path
@@ -66,7 +63,7 @@ MB = 1024.0 * 1024.0
 # ----------------------------------------------------------------------------- helpers
 
 
-from benchutil import captured_output, clean_scene, current_rss_kb, maxrss_kb, reset_peak_rss  # noqa: E402
+from benchutil import captured_output, clean_scene, current_rss_kb, maxrss_kb, reset_peak_rss, write_json  # noqa: E402
 
 
 def import_mesh(bpy, path: Path, scale_length: float):
@@ -357,15 +354,7 @@ def main(argv=None) -> int:
     print_table(rows, repeat)
     print(f"total bench time {total:.1f} s")
     if args.json:
-        out = Path(args.json)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        payload = {
-            "bpy": bpy.app.version_string,
-            "python": platform.python_version(),
-            "numpy": np.__version__,
-            "scipy": scipy.__version__,
-            "sklearn": sklearn.__version__,
-            "cpus": os.cpu_count(),
+        write_json(args.json, {
             "repeat": repeat,
             "segment_args": {"patches": PATCHES, "eta": ETA, "seed": SEED, "smoothing": "default"},
             "target_ratio": TARGET_RATIO,
@@ -375,9 +364,7 @@ def main(argv=None) -> int:
             },
             "meshes": rows,
             "total_s": total,
-        }
-        out.write_text(json.dumps(payload, indent=2))
-        print(f"figures written to {out}")
+        })
     return 0
 
 

@@ -48,11 +48,9 @@ from __future__ import annotations
 import argparse
 import contextlib
 import gc
-import json
 import os
 import platform
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -86,7 +84,7 @@ MIN_STRETCH_VERSION = (4, 3, 0)
 # ----------------------------------------------------------------------------- helpers
 
 
-from benchutil import captured_output, clean_scene  # noqa: E402
+from benchutil import captured_output, clean_scene, write_json  # noqa: E402
 
 
 def submesh(V, F, sel):
@@ -116,6 +114,23 @@ def measure(V, F, UV) -> dict:
 
 
 # ----------------------------------------------------------------------------- patches
+
+
+def segmented_patches(V, F, k: int, name: str, source: str, indent: str = "") -> list[dict]:
+    """Segment (V, F) into k patches with the add-on's core and return one benchmark patch each."""
+    import numpy as np
+
+    from bolus_addon.core import spectral
+
+    labels = spectral.segment(V, F, k, smoothing_mm=SEG_SMOOTHING_MM, rng=SEG_RNG).face_labels
+    ids = np.unique(labels)
+    print(f"{indent}spectral.segment(V, F, {k}, smoothing_mm={SEG_SMOOTHING_MM:g}, rng={SEG_RNG}): {len(ids)} patches "
+          f"of {', '.join(str(int((labels == p).sum())) for p in ids)} triangles")
+    out = []
+    for p in ids:
+        Vp, Fp = submesh(V, F, labels == p)
+        out.append({"name": f"{name} p{p}", "V": Vp, "F": Fp, "source": f"{source}, segment {k} -> patch {p}"})
+    return out
 
 
 def make_patches(quick: bool) -> list[dict]:
@@ -169,15 +184,7 @@ def make_patches(quick: bool) -> list[dict]:
         ext = Vn.max(axis=0) - Vn.min(axis=0)
         print(f"  nose region: {len(Fn)} triangles within {NOSE_RADIUS_MM:g} mm of the tip, connected to it; "
               f"bbox {ext[0]:.0f} x {ext[1]:.0f} x {ext[2]:.0f} mm")
-        seg = spectral.segment(Vn, Fn, 3, smoothing_mm=SEG_SMOOTHING_MM, rng=SEG_RNG)
-        labels = seg.face_labels
-        ids = np.unique(labels)
-        print(f"  spectral.segment(V, F, 3, smoothing_mm={SEG_SMOOTHING_MM:g}, rng={SEG_RNG}): {len(ids)} patches "
-              f"of {', '.join(str(int((labels == p).sum())) for p in ids)} triangles")
-        for p in ids:
-            Vp, Fp = submesh(Vn, Fn, labels == p)
-            out.append({"name": f"nose p{p}", "V": Vp, "F": Fp,
-                        "source": f"ict_face_narrow.obj x10, nose region ({len(Fn)} tri) segment 3 -> patch {p}"})
+        out += segmented_patches(Vn, Fn, 3, "nose", f"ict_face_narrow.obj x10, nose region ({len(Fn)} tri)", "  ")
     except Exception as exc:
         print(f"  nose patches SKIPPED: {type(exc).__name__}: {exc}")
         out.append({"name": "nose", "error": f"{type(exc).__name__}: {exc}"})
@@ -185,16 +192,8 @@ def make_patches(quick: bool) -> list[dict]:
     # chest wall (dm -> mm), 2 patches
     try:
         V, F, _ = load("makehuman_chest_patch.obj", 100.0)
-        seg = spectral.segment(V, F, 2, smoothing_mm=SEG_SMOOTHING_MM, rng=SEG_RNG)
-        labels = seg.face_labels
-        ids = np.unique(labels)
-        print(f"makehuman_chest_patch.obj (x100 -> mm): {len(F)} triangles; spectral.segment(V, F, 2, "
-              f"smoothing_mm={SEG_SMOOTHING_MM:g}, rng={SEG_RNG}): {len(ids)} patches of "
-              f"{', '.join(str(int((labels == p).sum())) for p in ids)} triangles")
-        for p in ids:
-            Vp, Fp = submesh(V, F, labels == p)
-            out.append({"name": f"chest p{p}", "V": Vp, "F": Fp,
-                        "source": f"makehuman_chest_patch.obj x100, segment 2 -> patch {p}"})
+        print(f"makehuman_chest_patch.obj (x100 -> mm): {len(F)} triangles")
+        out += segmented_patches(V, F, 2, "chest", "makehuman_chest_patch.obj x100", "  ")
     except Exception as exc:
         print(f"  chest patches SKIPPED: {type(exc).__name__}: {exc}")
         out.append({"name": "chest", "error": f"{type(exc).__name__}: {exc}"})
@@ -601,14 +600,7 @@ def main(argv=None) -> int:
     print_summary(rows, args)
     print(f"total bench time {total:.1f} s")
     if args.json:
-        out = Path(args.json)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        payload = {
-            "bpy": bpy.app.version_string,
-            "python": platform.python_version(),
-            "numpy": np.__version__,
-            "scipy": scipy.__version__,
-            "cpus": os.cpu_count(),
+        write_json(args.json, {
             "quick": args.quick,
             "repeat": args.repeat,
             "explicit_budget_s": args.explicit_budget,
@@ -617,9 +609,7 @@ def main(argv=None) -> int:
             "units": "EL, EA fractions (not %); seconds wall clock; lengths mm",
             "patches": rows,
             "total_s": total,
-        }
-        out.write_text(json.dumps(payload, indent=2, default=float))
-        print(f"figures written to {out}")
+        })
     return 0
 
 
