@@ -17,7 +17,7 @@ import numpy as np
 
 from .core.errors import BolusError
 
-__all__ = ["Region", "mm_per_unit", "read_region", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "set_seams", "show_colors"]
+__all__ = ["Region", "mm_per_unit", "read_region", "read_face_labels", "apply_cuts", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "set_seams", "show_colors"]
 
 
 def mm_per_unit(scene: bpy.types.Scene) -> float:
@@ -66,8 +66,11 @@ def active_mesh_object(context) -> bpy.types.Object:
     return obj
 
 
-def read_region(context, obj: bpy.types.Object | None = None) -> Region:
-    """Read the region (SPEC: selected faces in Edit Mode, else the whole mesh)."""
+def read_region(context, obj: bpy.types.Object | None = None, whole: bool = False) -> Region:
+    """Read the region (SPEC: selected faces in Edit Mode, else the whole mesh).
+
+    whole=True reads the whole mesh whatever is selected (for operators that work on
+    the patches, which were already fixed by the region of `segment`)."""
     obj = active_mesh_object(context) if obj is None else obj
     if obj.mode == "EDIT":
         obj.update_from_editmode()
@@ -78,7 +81,7 @@ def read_region(context, obj: bpy.types.Object | None = None) -> Region:
     warnings: list[str] = []
     selection_only = False
     region_poly = np.ones(npoly, dtype=bool)
-    if obj.mode == "EDIT":
+    if obj.mode == "EDIT" and not whole:
         sel = _get(me.polygons, "select", npoly, bool)
         if sel.any():
             region_poly = sel
@@ -220,3 +223,88 @@ def set_seams(me: bpy.types.Mesh, seam: np.ndarray, touched: np.ndarray) -> None
     cur = _get(me.edges, "use_seam", ne, bool)
     new = np.where(touched, seam, cur)
     me.edges.foreach_set("use_seam", new)
+
+
+def read_face_labels(me: bpy.types.Mesh, name: str) -> np.ndarray | None:
+    """(p,) int values of the FACE attribute ``name``, or None if the mesh has none."""
+    attr = me.attributes.get(name)
+    if attr is None or attr.domain != "FACE" or attr.data_type not in {"INT", "INT8"}:
+        return None
+    out = np.empty(len(me.polygons), dtype=np.int64)
+    attr.data.foreach_get("value", out)
+    return out
+
+
+def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.ndarray:
+    """Write a `core.cutlines.SmoothCutResult` into the mesh (object mode); returns polygon labels.
+
+    Polygons whose triangles were split (or got different labels) are replaced by the
+    result's triangles; every other polygon keeps its vertices, corners and data.  New
+    vertices and corners get their attributes (UVs, colours, vertex groups, ...)
+    interpolated by Blender from the polygon they lie in (``copy_from_face_interp``),
+    new edges along a split edge copy that edge's data (seams, sharpness, creases);
+    ``label_attr`` (a FACE INT attribute) is set from ``res.labels``.
+    """
+    import bmesh
+
+    npoly = len(me.polygons)
+    tri_poly = region.tri_poly
+    out_poly = tri_poly[res.face_parent]  # (m',) polygon of every result face
+    replaced = np.zeros(npoly, dtype=bool)
+    replaced[tri_poly[res.split]] = True
+    lo = np.full(npoly, np.iinfo(np.int64).max)
+    hi = np.full(npoly, np.iinfo(np.int64).min)
+    np.minimum.at(lo, out_poly, res.labels)
+    np.maximum.at(hi, out_poly, res.labels)
+    replaced |= (hi > lo) & (hi != np.iinfo(np.int64).min)
+    poly_label = np.where(hi != np.iinfo(np.int64).min, hi, 0)
+
+    co = _get(me.vertices, "co", len(me.vertices), np.float64, 3)
+    bm = bmesh.new()
+    try:
+        bm.from_mesh(me)
+        bm.verts.ensure_lookup_table()
+        bm.faces.ensure_lookup_table()
+        layer = bm.faces.layers.int.get(label_attr) or bm.faces.layers.int.new(label_attr)
+        verts, faces = list(bm.verts), list(bm.faces)  # index tables go stale once we add
+        n_in = len(region.vert_ids)
+        vmap = [verts[int(i)] for i in region.vert_ids]
+        support = [frozenset((int(region.vert_ids[i]),)) for i in range(n_in)]
+        for j in range(n_in, len(res.V)):
+            src = region.vert_ids[res.vert_src[j]]
+            w = res.vert_weights[j]
+            v = bm.verts.new(tuple(w @ co[src]))
+            v.copy_from_face_interp(faces[int(tri_poly[res.vert_parent[j]])])
+            vmap.append(v)
+            support.append(frozenset(int(s) for s, x in zip(src, w) if x != 0.0))
+        old_faces = [faces[int(p)] for p in np.nonzero(replaced)[0]]
+        old_edges = {e for f in old_faces for e in f.edges}
+        for f in np.nonzero(~replaced & (hi != np.iinfo(np.int64).min))[0]:
+            faces[int(f)][layer] = int(poly_label[f])
+        new_faces = np.nonzero(replaced[out_poly])[0]
+        for k in new_faces.tolist():
+            src_face = faces[int(out_poly[k])]
+            tri = [int(i) for i in res.F[k]]
+            f = bm.faces.new([vmap[i] for i in tri], src_face)
+            for loop in f.loops:
+                loop.copy_from_face_interp(src_face, False, False)  # (face, vert, multires)
+            f[layer] = int(res.labels[k])
+            for a, b in ((0, 1), (1, 2), (2, 0)):
+                sa, sb = support[tri[a]], support[tri[b]]
+                both = sa | sb
+                if len(both) != 2 or (len(sa) == 1 and len(sb) == 1):
+                    continue  # not a piece of a split input edge
+                u, v = (verts[i] for i in both)
+                orig = bm.edges.get((u, v))
+                e = bm.edges.get((vmap[tri[a]], vmap[tri[b]]))
+                if orig is not None and e is not None and e is not orig:
+                    e.copy_from(orig)
+        bmesh.ops.delete(bm, geom=old_faces, context="FACES_ONLY")
+        for e in old_edges:
+            if e.is_valid and not e.link_faces:
+                bm.edges.remove(e)
+        bm.to_mesh(me)
+    finally:
+        bm.free()
+    me.update()
+    return read_face_labels(me, label_attr)

@@ -5,6 +5,7 @@ import json
 
 import bpy
 
+from .cut_ops import PROP_CUT_TABLE
 from .operators import PROP_FLV, PROP_PATCH_TABLE, PROP_SUM_VARPI
 from .pattern_ops import PATTERN_SUFFIX, PROP_PATTERN_TABLE
 
@@ -53,6 +54,24 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
                     grid.label(text=head)
                 for r in table:
                     for val in (str(r["patch"]), str(r["vertices"]), str(r["faces"]), f"{r['sum_varpi']:.2f}", f"{r['flv']:.3g}"):
+                        grid.label(text=val)
+        box.operator("bolus.smooth_cuts", icon="IPO_EASE_IN_OUT")
+        if obj is not None and PROP_CUT_TABLE in obj:
+            try:
+                cuts = json.loads(obj[PROP_CUT_TABLE])
+            except (ValueError, TypeError):
+                cuts = []
+            if cuts:
+                grid = box.grid_flow(row_major=True, columns=4, even_columns=True, align=True)
+                for head in ("Border", "Cut", "Turn/mm", "Moved"):
+                    grid.label(text=head)
+                for r in cuts:
+                    for val in (
+                        f"{r['a']}|{r['b']}",
+                        r["method"],
+                        f"{r['turning_before']:.2f}→{r['turning_after']:.2f}",
+                        f"{r['max_shift_mm']:.1f} mm",
+                    ):
                         grid.label(text=val)
 
         box = layout.box()

@@ -1,0 +1,115 @@
+"""Operator `bolus.smooth_cuts` (SPEC; seed 4.1.2, Tables 4-1 and 4-2).
+
+The only operator that changes the source mesh's topology, because that is its whole
+purpose: the jagged patch borders left by `segment` are replaced by smooth cut curves
+on the surface (core.cutlines), crossed polygons are re-triangulated, and
+`bolus_patch`, the seams and the patch colours are updated.  Everything is computed
+before the mesh is touched; undo restores the mesh exactly.
+"""
+from __future__ import annotations
+
+import json
+
+import bpy
+import numpy as np
+
+from . import mesh_io
+from .core.colormap import categorical_linear_rgba
+from .core.cutlines import smooth_cuts
+from .core.errors import BolusError
+from .core.saliency import analyse
+from .core.spectral import patch_stats
+from .operators import ATTR_PATCH, ATTR_PATCH_COLOR, PROP_PATCH_TABLE, BolusOperator, check_topology
+
+#: ours: one row per border (method, turning before/after, shift), read by the panel
+PROP_CUT_TABLE = "bolus_cut_table"
+
+
+def _stats(V, F, labels, smoothing_mm: float) -> list[dict]:
+    inside = labels >= 0
+    Fi = F[inside]
+    ana = analyse(V, Fi, smoothing_mm) if smoothing_mm > 0 else None
+    Va = ana.V_analysis if ana is not None else V
+    return [p.as_dict() for p in patch_stats(Va, Fi, labels[inside], V)]
+
+
+def format_cut_row(r: dict) -> str:
+    kind = "closed " if r["closed"] else ""
+    text = (
+        f"Border {r['a']}|{r['b']} ({kind}{r['border_vertices']} vertices): {r['method']}, "
+        f"turning {r['turning_before']:.3f} -> {r['turning_after']:.3f} rad/mm, "
+        f"moved up to {r['max_shift_mm']:.2f} mm"
+    )
+    return text + (f" ({r['note']})" if r["note"] else "")
+
+
+class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
+    """Replace the jagged patch borders by smooth cut lines on the surface (seed 4.1.2); changes the mesh"""
+
+    bl_idname = "bolus.smooth_cuts"
+    bl_label = "Smooth Cut Lines"
+
+    def run(self, context):
+        region = mesh_io.read_region(context, whole=True)
+        obj, me = region.obj, region.mesh
+        if me.shape_keys is not None:
+            raise BolusError(
+                f"'{obj.name}' has shape keys; cutting would have to re-shape every key: apply or remove them first"
+            )
+        poly_labels = mesh_io.read_face_labels(me, ATTR_PATCH)
+        if poly_labels is None:
+            raise BolusError(f"'{obj.name}' has no '{ATTR_PATCH}' attribute: run Segment into Patches first")
+        from .core.topology import MeshTopology
+
+        topo = MeshTopology(region.V, region.F)
+        warnings = region.warnings + check_topology(topo, allow_nonmanifold=False)
+        labels = poly_labels[region.tri_poly]
+        smoothing = 0.0
+        if PROP_PATCH_TABLE in obj:
+            try:
+                smoothing = float(json.loads(obj[PROP_PATCH_TABLE]).get("smoothing_mm", 0.0))
+            except (ValueError, TypeError, AttributeError):
+                smoothing = 0.0
+        self.progress(0.05)
+        res = smooth_cuts(region.V, region.F, labels, progress=lambda f, t: self.progress(0.05 + 0.75 * f, t))
+        self.progress(0.8)
+        before = _stats(region.V, region.F, labels, smoothing)
+        after = _stats(res.V, res.F, res.labels, smoothing)
+        borders = [b.as_dict() for b in res.borders]
+        with mesh_io.object_mode(obj):
+            new_labels = mesh_io.apply_cuts(me, region, res, ATTR_PATCH)
+            seams = mesh_io.polygon_edge_labels(me, new_labels)
+            touched = mesh_io.edges_of_polygons(me, np.nonzero(new_labels >= 0)[0])
+            mesh_io.set_seams(me, seams, touched)
+            mesh_io.write_face_colors(me, ATTR_PATCH_COLOR, categorical_linear_rgba(new_labels))
+            me.update()
+        try:
+            table = json.loads(obj[PROP_PATCH_TABLE]) if PROP_PATCH_TABLE in obj else {}
+        except (ValueError, TypeError):
+            table = {}
+        table.update({"patches": after, "before_smooth_cuts": before, "smooth_cuts": True})
+        obj[PROP_PATCH_TABLE] = json.dumps(table)
+        obj[PROP_CUT_TABLE] = json.dumps(borders)
+        self.warn_all(warnings)
+        for r in borders:
+            if r["method"] == "unchanged":
+                self.report({"WARNING"}, format_cut_row(r))
+        changed = sum(r["method"] != "unchanged" for r in borders)
+        self.report(
+            {"INFO"},
+            f"Smoothed {changed} of {len(borders)} borders of '{obj.name}': {res.new_vertex_count} new vertices, "
+            f"{int(res.split.sum())} triangles split",
+        )
+        for r in borders:
+            self.report({"INFO"}, format_cut_row(r))
+        for b_row, a_row in zip(before, after):
+            self.report(
+                {"INFO"},
+                f"Patch {a_row['patch']}: vertices {b_row['vertices']} -> {a_row['vertices']}, edges {b_row['edges']} -> "
+                f"{a_row['edges']}, triangles {b_row['faces']} -> {a_row['faces']}, sum varpi {b_row['sum_varpi']:.4f} -> "
+                f"{a_row['sum_varpi']:.4f}, FLV {b_row['flv']:.4g} -> {a_row['flv']:.4g}",
+            )
+        return {"FINISHED"}
+
+
+classes = (BOLUS_OT_smooth_cuts,)

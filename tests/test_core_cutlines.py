@@ -1,0 +1,355 @@
+"""Core tests of the smooth cut lines (core.cutlines, seed 4.1.2; issue 4)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from meshgen import grid, ring_surface, spherical_cap
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from bolus_addon.core.cutlines import (
+    border_components,
+    fit_closed_curve,
+    fit_open_curve,
+    project_to_plane,
+    smooth_cuts,
+    turning_per_mm,
+)
+from bolus_addon.core.errors import BolusError
+from bolus_addon.core.topology import MeshTopology
+
+
+# ------------------------------------------------------------------ helpers
+def centroids(V, F):
+    return V[F].mean(axis=1)
+
+
+def areas(V, F):
+    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+
+
+def min_angles(V, F):
+    P = V[F]
+    out = np.full(len(F), 180.0)
+    for k in range(3):
+        u, w = P[:, (k + 1) % 3] - P[:, k], P[:, (k + 2) % 3] - P[:, k]
+        c = (u * w).sum(1) / (np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1))
+        out = np.minimum(out, np.degrees(np.arccos(np.clip(c, -1, 1))))
+    return out
+
+
+def patch_connected(F, labels, p):
+    """Edge-connectivity of the faces of patch p, computed here from scratch."""
+    idx = np.nonzero(labels == p)[0]
+    edges = {}
+    for f in idx:
+        for k in range(3):
+            e = tuple(sorted((F[f, k], F[f, (k + 1) % 3])))
+            edges.setdefault(e, []).append(f)
+    rows, cols = [], []
+    pos = {f: i for i, f in enumerate(idx)}
+    for fs in edges.values():
+        for a in fs[1:]:
+            rows.append(pos[fs[0]])
+            cols.append(pos[a])
+    G = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(idx), len(idx)))
+    return connected_components(G, directed=False)[0] == 1
+
+
+def border_edges(F, labels, a, b):
+    """Vertex pairs of the edges between faces of patch a and faces of patch b."""
+    owner = {}
+    for f in range(len(F)):
+        for k in range(3):
+            e = tuple(sorted((F[f, k], F[f, (k + 1) % 3])))
+            owner.setdefault(e, []).append(labels[f])
+    return np.array([e for e, ls in owner.items() if sorted(ls) == [a, b]])
+
+
+def point_triangle_distance(p, A, B, C):
+    """Distance of point p to triangle ABC (brute force via barycentric clamp, small meshes only)."""
+    # project onto the plane and clamp by checking the three edges
+    n = np.cross(B - A, C - A)
+    n = n / np.linalg.norm(n)
+    q = p - np.dot(p - A, n) * n
+    # barycentric of q
+    v0, v1, v2 = B - A, C - A, q - A
+    d00, d01, d11, d20, d21 = v0 @ v0, v0 @ v1, v1 @ v1, v2 @ v0, v2 @ v1
+    den = d00 * d11 - d01 * d01
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    u = 1 - v - w
+    if min(u, v, w) >= -1e-12:
+        return abs(np.dot(p - A, n))
+
+    def seg(p, a, b):
+        t = np.clip(np.dot(p - a, b - a) / np.dot(b - a, b - a), 0, 1)
+        return np.linalg.norm(p - (a + t * (b - a)))
+
+    return min(seg(p, A, B), seg(p, B, C), seg(p, C, A))
+
+
+def distance_to_mesh(P, V, F):
+    """Distance of each point to the mesh (brute force; fine for a few hundred points)."""
+    C = centroids(V, F)
+    out = []
+    for p in P:
+        near = np.argsort(np.linalg.norm(C - p, axis=1))[:12]
+        out.append(min(point_triangle_distance(p, *V[F[f]]) for f in near))
+    return np.array(out)
+
+
+def conic_through(x, y):
+    """Coefficients (A, B, C, D, E, F) of the conic through the points; asserts they fit one."""
+    s = max(np.abs(x).max(), np.abs(y).max())
+    x, y = x / s, y / s
+    D = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], 1)
+    _, sv, Vt = np.linalg.svd(D)
+    assert sv[-1] < 1e-9 * sv[0], "the points do not lie on one conic"
+    return Vt[-1]
+
+
+def sheet(n=30, size=100.0):
+    V, F = grid(n, n, size=size)
+    return V, F, size / n
+
+
+def check_invariants(V, F, labels, res):
+    """Rules every result must keep, checked independently of the implementation."""
+    size = np.ptp(V, axis=0).max()
+    new = np.arange(len(V), len(res.V))
+    assert len(new) > 0
+    # every new vertex lies on the original surface
+    assert distance_to_mesh(res.V[new], V, F).max() < 1e-9 * size
+    # input vertices keep their index and position
+    np.testing.assert_array_equal(res.V[: len(V)], V)
+    # area unchanged, per original triangle too
+    assert abs(areas(res.V, res.F).sum() - areas(V, F).sum()) < 1e-9 * areas(V, F).sum()
+    per_parent = np.bincount(res.face_parent, weights=areas(res.V, res.F), minlength=len(F))
+    np.testing.assert_allclose(per_parent, areas(V, F), rtol=1e-9, atol=1e-12 * size**2)
+    # same orientation as the parent triangle
+    n_new = np.cross(res.V[res.F[:, 1]] - res.V[res.F[:, 0]], res.V[res.F[:, 2]] - res.V[res.F[:, 0]])
+    n_old = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])[res.face_parent]
+    assert ((n_new * n_old).sum(1) > 0).all()
+    # same patches, each connected
+    assert set(np.unique(res.labels)) == set(np.unique(labels))
+    for p in np.unique(labels[labels >= 0]):
+        assert patch_connected(res.F, res.labels, p)
+    # a manifold mesh without T-junctions: every edge has 1 or 2 faces and the boundary
+    # length is the same as before
+    topo0, topo1 = MeshTopology(V, F), MeshTopology(res.V, res.F)
+    assert topo1.edge_face_count.max() <= 2
+    b0 = topo0.edge_lengths[topo0.boundary_edges].sum()
+    b1 = topo1.edge_lengths[topo1.boundary_edges].sum()
+    assert abs(b0 - b1) < 1e-9 * b0
+
+
+# ------------------------------------------------------------------ curve fitting
+def test_projection_matches_eqs_4_7_to_4_9():
+    rng = np.random.default_rng(1)
+    P = rng.normal(size=(20, 3))
+    p = np.array([0.3, -0.7, 0.5])  # plane p.x + 1 = 0 of the seed
+    origin = -p / (p @ p)
+    ours = project_to_plane(P, p, origin)
+    x1 = p[0] / (p @ p) * ((p[1] ** 2 + p[2] ** 2) / p[0] * P[:, 0] - p[1] * P[:, 1] - p[2] * P[:, 2])
+    # eq. 4-7 as printed omits the constant term of the plane; with it (the +1) the
+    # projection of the seed's plane is x1 - p1/|p|^2
+    x1 = x1 - p[0] / (p @ p)
+    y1 = p[1] / p[0] * (x1 - P[:, 0]) + P[:, 1]
+    z1 = p[2] / p[0] * (x1 - P[:, 0]) + P[:, 2]
+    np.testing.assert_allclose(ours, np.stack([x1, y1, z1], 1), atol=1e-12)
+    np.testing.assert_allclose(ours @ p + 1.0, 0.0, atol=1e-12)
+
+
+def test_line_kept_for_zigzag_and_parabola_for_a_bend():
+    x = np.linspace(0, 100, 40)
+    zig = 0.5 * (-1.0) ** np.arange(40)  # mesh zig-zag around a straight line
+    _, order, _ = fit_open_curve(x, 2.0 + 0.1 * x + zig, noise=2.5)
+    assert order == 1
+    _, order, rms = fit_open_curve(x, 0.01 * (x - 50) ** 2 + zig, noise=2.5)
+    assert order == 2 and rms < 0.6
+
+
+def test_closed_fit_of_a_circle_is_an_ellipse():
+    s = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    xy = np.stack([30 * np.cos(s) + 0.3 * np.cos(7 * s), 20 * np.sin(s)], 1)
+    coef, K, rms = fit_closed_curve(xy, noise=3.0)
+    assert K == 1 and rms < 0.5
+
+
+def test_turning_of_a_staircase_and_a_line():
+    V = np.array([[i, i % 2, 0.0] for i in range(11)], dtype=float)
+    E = np.stack([np.arange(10), np.arange(1, 11)], 1)
+    t, L = turning_per_mm(V, E)
+    assert t == pytest.approx(9 * np.pi / 2 / L)
+    V[:, 1] = 0
+    assert turning_per_mm(V, E)[0] == pytest.approx(0.0, abs=1e-12)
+
+
+# ------------------------------------------------------------------ smooth_cuts
+def test_jagged_straight_border_becomes_a_line():
+    V, F, h = sheet()
+    c = centroids(V, F)
+    labels = (c[:, 0] > 50 + 0.3 * (c[:, 1] - 50)).astype(int)
+    res = smooth_cuts(V, F, labels)
+    check_invariants(V, F, labels, res)
+    (rep,) = res.borders
+    assert rep.method == "line" and not rep.closed
+    E = border_edges(res.F, res.labels, 0, 1)
+    verts = np.unique(E)
+    new = verts[verts >= len(V)]
+    P = res.V[new, :2]
+    # the new vertices are exactly on one straight line
+    A = np.c_[P[:, 1], np.ones(len(P))]
+    coef, *_ = np.linalg.lstsq(A, P[:, 0], rcond=None)
+    assert np.abs(A @ coef - P[:, 0]).max() < 1e-9 * 100
+    # snapped input vertices are within the snapping tolerance of it
+    Q = res.V[verts, :2]
+    assert np.abs(np.c_[Q[:, 1], np.ones(len(Q))] @ coef - Q[:, 0]).max() <= 0.05 * h * np.sqrt(2) + 1e-9
+    t0 = turning_per_mm(V, border_edges(F, labels, 0, 1))[0]
+    t1 = turning_per_mm(res.V, E)[0]
+    assert t1 < 0.1 * t0
+    assert rep.turning_after == pytest.approx(t1)
+
+
+def test_curved_border_becomes_a_parabola():
+    V, F, h = sheet()
+    c = centroids(V, F)
+    labels = (c[:, 0] - 50 - 0.01 * (c[:, 1] - 50) ** 2 > 0).astype(int)
+    res = smooth_cuts(V, F, labels)
+    check_invariants(V, F, labels, res)
+    (rep,) = res.borders
+    assert rep.method == "parabola"
+    E = border_edges(res.F, res.labels, 0, 1)
+    new = np.unique(E)[np.unique(E) >= len(V)]
+    x, y = res.V[new, 0], res.V[new, 1]
+    # the new vertices lie on one conic, and that conic is a parabola (B^2 = 4AC); the
+    # parabola's axis is the border's principal direction, not necessarily the y axis
+    q = conic_through(x, y)
+    A, B, C = q[0], q[1], q[2]
+    assert abs(B * B - 4 * A * C) < 1e-6 * (A * A + B * B + C * C)
+    assert rep.turning_after < 0.3 * rep.turning_before
+
+
+def test_enclosed_patch_gets_an_ellipse():
+    V, F, h = sheet()
+    c = centroids(V, F)
+    labels = (np.linalg.norm(c[:, :2] - [45, 55], axis=1) < 25).astype(int)
+    res = smooth_cuts(V, F, labels)
+    check_invariants(V, F, labels, res)
+    (rep,) = res.borders
+    assert rep.closed and rep.method == "ellipse"
+    E = border_edges(res.F, res.labels, 0, 1)
+    new = np.unique(E)[np.unique(E) >= len(V)]
+    x, y = res.V[new, 0], res.V[new, 1]
+    q = conic_through(x, y)
+    assert q[1] ** 2 - 4 * q[0] * q[2] < 0  # an ellipse
+    assert rep.turning_after < 0.3 * rep.turning_before
+
+
+def test_ring_around_a_tube_is_cut_by_a_plane():
+    prof = np.stack([np.full(31, 40.0), np.linspace(0, 120, 31)], 1)
+    V, F, _ = ring_surface(prof, na=48, pole=False)
+    c = centroids(V, F)
+    labels = (c[:, 2] > 60 + 0.3 * c[:, 0]).astype(int)
+    res = smooth_cuts(V, F, labels)
+    check_invariants(V, F, labels, res)
+    (rep,) = res.borders
+    assert rep.closed and rep.method == "plane section"
+    E = border_edges(res.F, res.labels, 0, 1)
+    new = np.unique(E)[np.unique(E) >= len(V)]
+    P = res.V[new]
+    _, sv, _ = np.linalg.svd(P - P.mean(0))
+    assert sv[2] < 1e-9 * sv[0]
+
+
+def test_dome_loop_on_a_curved_surface():
+    V, F = spherical_cap(50, 80, 4)
+    c = centroids(V, F)
+    labels = (np.linalg.norm(c[:, :2] - [10, 5], axis=1) < 20).astype(int)
+    res = smooth_cuts(V, F, labels)
+    check_invariants(V, F, labels, res)
+    assert res.borders[0].closed
+    assert res.borders[0].turning_after < 0.3 * res.borders[0].turning_before
+
+
+def test_three_patches_cuts_stay_in_their_pair():
+    V, F = grid(30, 30, size=100.0, jitter=0.2)
+    c = centroids(V, F)
+    labels = np.where(c[:, 0] + 3 * np.sin(c[:, 1] / 7) < 40, 0, np.where(c[:, 1] + 2 * np.cos(c[:, 0] / 5) < 50, 1, 2))
+    res = smooth_cuts(V, F, labels)
+    check_invariants(V, F, labels, res)
+    assert {(r.a, r.b) for r in res.borders} == {(0, 1), (0, 2), (1, 2)}
+    for r in res.borders:
+        assert r.method != "unchanged"
+        assert r.turning_after < 0.3 * r.turning_before
+    # a cut between a and b never splits or relabels a face of the third patch: faces that
+    # end up in patch p came from faces of p or of a patch it shares a border with, and
+    # every face that kept its triangle kept its label unless it lies next to the border
+    moved = res.labels != labels[res.face_parent]
+    assert moved.sum() < 0.1 * len(res.F)
+
+
+@pytest.mark.parametrize("slope", [0.2, 0.37, 0.61])
+def test_no_slivers_where_snapping_avoids_them(slope):
+    # lines of these slopes pass within a few % of an edge from grid vertices
+    V, F, h = sheet()
+    c = centroids(V, F)
+    labels = (c[:, 0] > 50 + slope * (c[:, 1] - 50)).astype(int)
+    res = smooth_cuts(V, F, labels)
+    check_invariants(V, F, labels, res)
+    snapped = min_angles(res.V, res.F[~res.face_unchanged]).min()
+    assert snapped >= 1.0
+    # without the snapping tolerance the same cut makes thinner triangles
+    raw = smooth_cuts(V, F, labels, snap=0.0)
+    assert min_angles(raw.V, raw.F[~raw.face_unchanged]).min() < snapped
+
+
+def test_faces_outside_any_patch_are_never_touched():
+    V, F, h = sheet()
+    c = centroids(V, F)
+    labels = (c[:, 0] > 50 + 0.3 * (c[:, 1] - 50)).astype(int)
+    labels[c[:, 1] > 80] = -1
+    res = smooth_cuts(V, F, labels)
+    out = res.labels < 0
+    assert res.face_unchanged[out].all()
+    assert out.sum() == (labels < 0).sum()
+
+
+def test_border_components_of_a_loop_and_a_chain():
+    V, F, h = sheet()
+    c = centroids(V, F)
+    labels = (np.linalg.norm(c[:, :2] - 50, axis=1) < 20).astype(int)
+    (b,) = border_components(MeshTopology(V, F), labels)
+    assert b.closed and len(b.order) == len(np.unique(b.edges))
+
+
+# ------------------------------------------------------------------ refusals
+def test_refuses_a_single_patch():
+    V, F, _ = sheet(5)
+    with pytest.raises(BolusError, match="only one patch"):
+        smooth_cuts(V, F, np.zeros(len(F), dtype=int))
+
+
+def test_refuses_wrong_label_shape():
+    V, F, _ = sheet(5)
+    with pytest.raises(BolusError, match="one patch per triangle"):
+        smooth_cuts(V, F, np.zeros(3, dtype=int))
+
+
+def test_refuses_when_every_border_is_too_short():
+    V = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0]], dtype=float)
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    labels = np.array([0, 1])  # the border is one edge
+    with pytest.raises(BolusError, match="too short"):
+        smooth_cuts(V, F, labels)
+
+
+def test_refuses_patches_without_a_common_border():
+    V, F, _ = sheet(6)
+    c = centroids(V, F)
+    labels = np.full(len(F), -1)
+    labels[c[:, 0] < 30] = 0
+    labels[c[:, 0] > 70] = 1
+    with pytest.raises(BolusError, match="do not share any border"):
+        smooth_cuts(V, F, labels)
