@@ -56,7 +56,9 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
             raise BolusError(
                 f"'{obj.name}' has shape keys; cutting would have to re-shape every key: apply or remove them first"
             )
-        poly_labels = mesh_io.read_face_labels(me, ATTR_PATCH)
+        # attribute data is empty while the mesh is in Edit Mode (it lives in the edit-mesh)
+        with mesh_io.object_mode(obj):
+            poly_labels = mesh_io.read_face_labels(me, ATTR_PATCH)
         if poly_labels is None:
             raise BolusError(f"'{obj.name}' has no '{ATTR_PATCH}' attribute: run Segment into Patches first")
         from .core.topology import MeshTopology

@@ -8,9 +8,11 @@ in a scene where 1 unit = 1 mm, selects the treatment area around the nose in Ed
 (faces within --radius mm of the nose tip), and runs the add-on's operators on it:
 
 1. bolus.saliency_preview  -> out/saliency.png
-2. bolus.segment           -> out/patches.png
-3. bolus.unfold            -> out/pattern.png (the flat pattern, coloured by area distortion)
-4. bolus.export_pattern    -> out/pattern.svg (true scale: print at 100 %)
+2. bolus.segment           -> out/patches.png (jagged borders along mesh edges)
+3. bolus.smooth_cuts       -> out/cuts.png (the borders replaced by smooth cut lines;
+                              close-ups before and after: cuts_before.png, cuts_after.png)
+4. bolus.unfold            -> out/pattern.png (the flat pattern, coloured by area distortion)
+5. bolus.export_pattern    -> out/pattern.svg (true scale: print at 100 %)
 
 and writes out/demo.blend and the per-patch tables (out/report.json, out/report.txt).
 """
@@ -135,6 +137,23 @@ def render(obj: bpy.types.Object, color_attribute: str, path: Path) -> None:
     bpy.ops.render.render(write_still=True)
 
 
+def render_closeup(obj: bpy.types.Object, color_attribute: str, path: Path) -> None:
+    """Front view framing the patches only (faces with bolus_patch >= 0)."""
+    from bolus_addon.mesh_io import read_face_labels
+
+    scene = bpy.context.scene
+    labels = read_face_labels(obj.data, "bolus_patch")
+    verts = {v for p, lab in zip(obj.data.polygons, labels) if lab >= 0 for v in p.vertices}
+    co = np.array([obj.matrix_world @ obj.data.vertices[i].co for i in verts])
+    lo, hi = co.min(axis=0), co.max(axis=0)
+    cam = scene.camera
+    old = (tuple(cam.location), cam.data.ortho_scale)
+    cam.location = (float((lo[0] + hi[0]) / 2), cam.location[1], float((lo[2] + hi[2]) / 2))
+    cam.data.ortho_scale = float(max(hi[0] - lo[0], (hi[2] - lo[2]) / 0.8) * 1.15)
+    render(obj, color_attribute, path)
+    cam.location, cam.data.ortho_scale = old
+
+
 def render_pattern(face: bpy.types.Object, pattern: bpy.types.Object, path: Path) -> None:
     """Top view of the pattern alone, coloured by area distortion (blue shrunk, red stretched)."""
     from bolus_addon.mesh_io import show_colors
@@ -175,10 +194,19 @@ def main():
     obj = load_example()
     sel = select_treatment_area(obj, args.radius)
     smoothing = args.smoothing if args.smoothing is not None else bpy.context.scene.bolus.smoothing_mm
+    setup_render(obj, args.resolution)
     bpy.ops.object.mode_set(mode="EDIT")
     t_sal = run_op(bpy.ops.bolus.saliency_preview, smoothing_mm=smoothing)
     t_seg = run_op(bpy.ops.bolus.segment, patches=args.patches, eta=5.0, seed=0, smoothing_mm=smoothing)
     bpy.ops.object.mode_set(mode="OBJECT")
+    render(obj, "bolus_saliency_color", out / "saliency.png")
+    render(obj, "bolus_patch_color", out / "patches.png")
+    render_closeup(obj, "bolus_patch_color", out / "cuts_before.png")
+    jagged_table = json.loads(obj["bolus_patch_table"])
+    t_cut = run_op(bpy.ops.bolus.smooth_cuts)
+    cuts = json.loads(obj["bolus_cut_table"])
+    render(obj, "bolus_patch_color", out / "cuts.png")
+    render_closeup(obj, "bolus_patch_color", out / "cuts_after.png")
     t_unf = run_op(bpy.ops.bolus.unfold)
     t_svg = run_op(bpy.ops.bolus.export_pattern, filepath=str((out / "pattern.svg").resolve()), seam_allowance_mm=5.0)
     pattern = bpy.data.objects[obj.name + "_pattern"]
@@ -191,22 +219,34 @@ def main():
         "smoothing_mm": smoothing,
         "sum_varpi": obj["bolus_sum_varpi"],
         "flv": obj["bolus_flv"],
-        "segment": table,
+        "segment": jagged_table,
+        "smooth_cuts": {"borders": cuts, "patches": table["patches"]},
         "pattern": pattern_table,
-        "seconds": {"saliency_preview": round(t_sal, 3), "segment": round(t_seg, 3), "unfold": round(t_unf, 3),
+        "seconds": {"saliency_preview": round(t_sal, 3), "segment": round(t_seg, 3), "smooth_cuts": round(t_cut, 3),
+                    "unfold": round(t_unf, 3),
                     "export_pattern": round(t_svg, 3)},
     }
     (out / "report.json").write_text(json.dumps(report, indent=2))
     lines = [
         f"Bolus demo: {EXAMPLE.name}, treatment area = {int(sel.sum())} faces within {args.radius:g} mm of the nose tip",
         f"Analysis smoothing {smoothing:g} mm: sum varpi = {report['sum_varpi']:.4f} rad, FLV = {report['flv']:.4g}",
-        f"Segmentation: {len(table['patches'])} patches (asked {args.patches}, eta 5, seed 0)",
-        f"{'patch':>5} {'vertices':>9} {'edges':>7} {'triangles':>10} {'area cm2':>9} {'sum varpi':>10} {'FLV':>10}",
     ]
-    for r in table["patches"]:
+    for title, rows in (
+        (f"Segmentation: {len(jagged_table['patches'])} patches (asked {args.patches}, eta 5, seed 0) (Table 4-1)", jagged_table["patches"]),
+        ("With smooth cut lines (Table 4-2)", table["patches"]),
+    ):
+        lines.append(title)
+        lines.append(f"{'patch':>5} {'vertices':>9} {'edges':>7} {'triangles':>10} {'area cm2':>9} {'sum varpi':>10} {'FLV':>10}")
+        for r in rows:
+            lines.append(
+                f"{r['patch']:>5} {r['vertices']:>9} {r['edges']:>7} {r['faces']:>10} {r['area_mm2'] / 100:>9.1f} "
+                f"{r['sum_varpi']:>10.4f} {r['flv']:>10.4g}"
+            )
+    lines.append(f"{'border':>6} {'cut':<24} {'turning rad/mm':>16} {'moved mm':>9}")
+    for b in cuts:
         lines.append(
-            f"{r['patch']:>5} {r['vertices']:>9} {r['edges']:>7} {r['faces']:>10} {r['area_mm2'] / 100:>9.1f} "
-            f"{r['sum_varpi']:>10.4f} {r['flv']:>10.4g}"
+            f"{b['a']:>3}|{b['b']:<2} {b['method']:<24} {b['turning_before']:>7.3f} -> {b['turning_after']:<6.3f} "
+            f"{b['max_shift_mm']:>9.2f}"
         )
     lines.append(
         f"Pattern '{pattern.name}': EL {pattern_table['EL'] * 100:.2f} %, EA {pattern_table['EA'] * 100:.2f} %, "
@@ -218,12 +258,9 @@ def main():
     (out / "report.txt").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
-    setup_render(obj, args.resolution)
-    render(obj, "bolus_saliency_color", out / "saliency.png")
-    render(obj, "bolus_patch_color", out / "patches.png")
     render_pattern(obj, pattern, out / "pattern.png")
     bpy.ops.wm.save_as_mainfile(filepath=str((out / "demo.blend").resolve()))
-    print(f"wrote {out}/demo.blend, saliency.png, patches.png, pattern.png, pattern.svg, report.json, report.txt")
+    print(f"wrote {out}/demo.blend, saliency.png, patches.png, cuts.png, cuts_before.png, cuts_after.png, pattern.png, pattern.svg, report.json, report.txt")
 
 
 if __name__ == "__main__":

@@ -49,11 +49,12 @@ Where the projection is not valid (more than 2 % of the area around the border f
 more than ~78 degrees away from d), or the fitted curve or the new cut strays more
 than max(3 h, 15 % of the border length) from the border (symmetric Hausdorff
 distance, so a patch that would shrink away is caught too), or the result breaks a rule (the cut leaves the band,
-a patch falls apart or vanishes, a jagged piece of border remains), we try a planar
+a patch falls apart or vanishes, a jagged piece of border remains, the cut would
+turn more than the border did), we try a planar
 section for a closed loop (a ring around a limb: Gamma = least-squares plane of the
 loop, S = Gamma), then a *smoothed path along the surface*: the zero set of the
-patch indicator diffused on the surface (one implicit heat step: one step of MBO
-thresholding, i.e. a short curve-shortening flow of the border), over a diffusion
+patch indicator diffused on the surface (two MBO steps: implicit heat step, threshold,
+heat step again; a short curve-shortening flow of the border), over a diffusion
 length of 2 mean border edges, or 3.5 or 6 when the shorter one still turns more
 than 30 % of the jagged border (the smoothest valid one is kept).  A border that still cannot be smoothed is left as it is, and the
 report says why.
@@ -99,7 +100,7 @@ NOISE_FRACTION = 0.25  #: RMS below this fraction of the mean border edge is mes
 MAX_FOURIER = 3
 PARAM_CORRECTIONS = 4  #: closed fits: parameter-correction rounds (nodes re-parameterised by their nearest curve point)
 MBO_SIGMA_EDGES = (2.0, 3.5, 6.0)  #: diffusion lengths tried, in mean border edges
-MBO_ITERATIONS = 1
+MBO_ITERATIONS = 2
 SMOOTH_ENOUGH = 0.3  #: a smoothed path is accepted at once when it turns <= 30 % of the border
 
 
@@ -178,12 +179,16 @@ def _order_edges(edges: np.ndarray) -> tuple[np.ndarray | None, bool]:
     return order, closed
 
 
-def turning_per_mm(V: np.ndarray, edges: np.ndarray) -> tuple[float, float]:
+def turning_per_mm(V: np.ndarray, edges: np.ndarray, normals: np.ndarray | None = None) -> tuple[float, float]:
     """(mean absolute turning angle per mm (rad/mm), length (mm)) of a border edge set.
 
-    The turning angle is taken at every vertex joining exactly two of the edges (the
-    angle between the incoming and the outgoing direction, in 3D); ends and branch
-    points are skipped.  Summed and divided by the total length.
+    The turning angle is taken at every vertex joining exactly two of the edges: the
+    angle between the incoming and the outgoing direction.  With ``normals`` (n,3)
+    (vertex normals of the surface) both directions are first projected on the
+    tangent plane, so the measure is the cut's geodesic turning, the bending a
+    modeler sees on the skin, without the surface's own curvature (a straight cut
+    over a curved nose has none); without them it is the plain 3D angle.  Ends and
+    branch points are skipped.  Summed and divided by the total length.
     """
     edges = np.asarray(edges)
     if len(edges) == 0:
@@ -194,16 +199,24 @@ def turning_per_mm(V: np.ndarray, edges: np.ndarray) -> tuple[float, float]:
     for i, (u, v) in enumerate(edges.tolist()):
         inc.setdefault(u, []).append(i)
         inc.setdefault(v, []).append(i)
-    total = 0.0
+    mids, a_end, b_end = [], [], []
     for vtx, es in inc.items():
         if len(es) != 2:
             continue
-        (i, j) = es
-        # directions pointing away from vtx
-        di = V[edges[i, 1] if edges[i, 0] == vtx else edges[i, 0]] - V[vtx]
-        dj = V[edges[j, 1] if edges[j, 0] == vtx else edges[j, 0]] - V[vtx]
-        c = np.dot(di, dj) / max(np.linalg.norm(di) * np.linalg.norm(dj), 1e-300)
-        total += np.pi - np.arccos(np.clip(c, -1.0, 1.0))
+        i, j = es
+        mids.append(vtx)
+        a_end.append(edges[i, 1] if edges[i, 0] == vtx else edges[i, 0])
+        b_end.append(edges[j, 1] if edges[j, 0] == vtx else edges[j, 0])
+    if not mids:
+        return 0.0, length
+    mids, a_end, b_end = np.array(mids), np.array(a_end), np.array(b_end)
+    di, dj = V[a_end] - V[mids], V[b_end] - V[mids]  # pointing away from the vertex
+    if normals is not None:
+        nrm = normals[mids]
+        di = di - (di * nrm).sum(1, keepdims=True) * nrm
+        dj = dj - (dj * nrm).sum(1, keepdims=True) * nrm
+    c = (di * dj).sum(1) / np.maximum(np.linalg.norm(di, axis=1) * np.linalg.norm(dj, axis=1), 1e-300)
+    total = float((np.pi - np.arccos(np.clip(c, -1.0, 1.0))).sum())
     return total / max(length, 1e-300), length
 
 
@@ -398,7 +411,7 @@ class BorderReport:
     border_vertices: int
     length_before_mm: float
     length_after_mm: float
-    turning_before: float  #: rad/mm
+    turning_before: float  #: rad/mm, geodesic (tangent-plane) turning, see `turning_per_mm`
     turning_after: float
     max_shift_mm: float  #: largest distance of the new cut from the old border
     fit_rms_mm: float = 0.0
@@ -729,7 +742,7 @@ def _diffused_indicator(st: _State, a: int, b: int, sigma: float) -> np.ndarray:
 def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: float) -> tuple[_State, BorderReport]:
     a, b = border.a, border.b
     topo = MeshTopology(st.V, st.F)
-    turn0, len0 = turning_per_mm(st.V, border.edges)
+    turn0, len0 = turning_per_mm(st.V, border.edges, topo.vertex_normals)
     nverts = len(np.unique(border.edges))
     report = BorderReport(a, b, border.closed, "unchanged", nverts, len0, len0, turn0, turn0, 0.0)
     if nverts < 3:
@@ -807,10 +820,13 @@ def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: 
             except _CutFailed as exc:
                 reasons.append(f"{name}: {exc}")
                 continue
-            turn1, len1 = turning_per_mm(new_st.V, cut_edges)
+            turn1, len1 = turning_per_mm(new_st.V, cut_edges, MeshTopology(new_st.V, new_st.F).vertex_normals)
             shift = _hausdorff(border.edges, st.V, cut_edges, new_st.V)
             if shift > limit:
                 reasons.append(f"{name}: the cut would move {shift:.1f} mm from the border")
+                continue
+            if turn1 >= turn0:
+                reasons.append(f"{name}: the cut would not be smoother than the border")
                 continue
             result = (new_st, name, len1, turn1, shift, rms)
             if name == "smoothed path" and turn1 > SMOOTH_ENOUGH * turn0:
