@@ -167,3 +167,39 @@ def spiral_strip(turns=1.27, r0=60.0, pitch=6.0, width=12.0, na=120, nw=3):
     V = np.stack([(r * np.cos(t)).ravel(), (r * np.sin(t)).ravel(), np.zeros(t.size)], axis=1)
     _, F = grid(na, nw)
     return V, F
+
+
+def box(size=(40.0, 30.0, 20.0), n: int = 4):
+    """Closed axis-aligned box [0, sx] x [0, sy] x [0, sz], each side an n x n grid, outward normals."""
+    size = np.asarray(size, dtype=float)
+    Vs, Fs, off = [], [], 0
+    for axis in range(3):
+        u, v = [k for k in range(3) if k != axis]
+        for side in (0.0, 1.0):
+            G, Fg = grid(n, n, 1.0)
+            P = np.zeros((len(G), 3))
+            P[:, u], P[:, v], P[:, axis] = G[:, 0], G[:, 1], side
+            Vs.append(P * size)
+            Fs.append(Fg + off)
+            off += len(G)
+    V, F = np.concatenate(Vs), np.concatenate(Fs)
+    key = np.round(V / size.max() * 1e6).astype(np.int64)
+    uniq, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    V, F = V[first], inv.reshape(-1)[F]
+    C = V[F].mean(axis=1) - size / 2
+    nrm = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    inward = np.einsum("ij,ij->i", nrm, C) < 0
+    F[inward] = F[inward][:, ::-1]
+    return V, F
+
+
+def graded_strip(length=200.0, width=20.0, coarse_cells=10, fine_cells=160, ny=4):
+    """Flat strip in z = 0 along x: the first half in ``coarse_cells`` big cells, the second
+    half in ``fine_cells`` small ones (same ny rows across).  Face count and area are far
+    apart: most triangles lie in the fine half, which holds only half the area."""
+    xs = np.r_[np.linspace(0.0, length / 2, coarse_cells + 1), np.linspace(length / 2, length, fine_cells + 1)[1:]]
+    ys = np.linspace(0.0, width, ny + 1)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    V = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], axis=1)
+    _, F = grid(len(xs) - 1, ny)
+    return V, F

@@ -1,0 +1,204 @@
+"""Printing features and the orientation search, eqs. 6-1..6-20 (SPEC "Print orientation")."""
+import numpy as np
+import pytest
+from conftest import ASSETS
+from meshgen import box, grid, icosphere, sheet_with_dome, spherical_cap, torus
+
+from bolus_addon.core.errors import BolusError
+from bolus_addon.core.objfile import load_obj
+from bolus_addon.core.print_orientation import (
+    cusp_height,
+    face_support,
+    fibonacci_sphere,
+    normal_curvature,
+    orient,
+    orient_parts,
+    overhang_faces,
+    place_on_plate,
+    print_objective,
+    rotation_to_z,
+    surface_quality,
+)
+from bolus_addon.core.topology import MeshTopology
+
+Z = np.array([0.0, 0.0, 1.0])
+
+
+def _random_rotation(seed):
+    Q, R = np.linalg.qr(np.random.default_rng(seed).standard_normal((3, 3)))
+    Q = Q * np.sign(np.diag(R))
+    return Q if np.linalg.det(Q) > 0 else -Q
+
+
+def _four_triangles():
+    """Four triangles of area 50 mm^2 with normals +z, -z, (0, .6, -.8) and (0, .8, -.6)."""
+    V = np.array([
+        [0, 0, 0], [10, 0, 0], [0, 10, 0],  # n = +z, centroid z = 0
+        [0, 0, 20], [0, 10, 20], [10, 0, 20],  # n = -z, centroid z = 20
+        [0, 0, 30], [0, 8, 36], [10, 0, 30],  # n = (0, .6, -.8), centroid z = 32
+        [0, 0, 50], [0, 6, 58], [10, 0, 50],  # n = (0, .8, -.6), centroid z = 52.67
+    ], dtype=float)
+    return V, np.arange(12).reshape(4, 3)
+
+
+def test_hand_computed_values_on_four_triangles():
+    V, F = _four_triangles()
+    t = MeshTopology(V, F)
+    np.testing.assert_allclose(t.areas, 50.0)
+    np.testing.assert_allclose(t.face_normals, [[0, 0, 1], [0, 0, -1], [0, 0.6, -0.8], [0, 0.8, -0.6]], atol=1e-12)
+    # b = +z: plate z0 = 0; overhangs: the -z face and the one at 0.8 (> cos 45 = 0.707), not the one at 0.6
+    np.testing.assert_allclose(cusp_height(t.face_normals, Z), [0.2, 0.2, 0.16, 0.12])  # eq. 6-1
+    E, EM = surface_quality(V, F, Z)  # eqs. 6-2, 6-3
+    np.testing.assert_allclose(E, [10.0, 10.0, 8.0, 6.0])
+    assert EM == pytest.approx(34.0)
+    assert overhang_faces(t.face_normals, Z).tolist() == [False, True, True, False]
+    np.testing.assert_allclose(face_support(V, F, Z), [0.0, 50 * 20, 50 * 32, 0.0])  # eqs. 6-9..6-11
+    o = print_objective(V, F, [Z, -Z, 2 * Z])
+    np.testing.assert_allclose(o.WQ, [34.0, 34.0, 34.0])  # eq. 6-7: 0.2 * 50 * (1 + 1 + .8 + .6)
+    # b = -z: plate at z = 58 (the top vertex), only the +z face overhangs, 58 mm above it
+    np.testing.assert_allclose(o.WU, [50 * 20 + 50 * 32, 50 * 58, 50 * 20 + 50 * 32])  # eq. 6-14
+    np.testing.assert_allclose(o.support_volume, [50 * 20 + 50 * 0.8 * 32, 50 * 58, 50 * 20 + 50 * 0.8 * 32])
+    np.testing.assert_allclose(o.objective, o.WQ + o.WU)
+    # the plate is the lowest vertex, not the lowest centroid; layer height scales WQ only
+    o2 = print_objective(V, F, [0.0, 0.0, 1.0], h=0.1)
+    assert o2.WQ[0] == pytest.approx(17.0) and o2.WU[0] == pytest.approx(2600.0)
+
+
+def test_chunked_evaluation_matches_one_block():
+    V, F, _ = sheet_with_dome(n_sheet=6, n_dome=6, na=24)
+    B = fibonacci_sphere(300)
+    a = print_objective(V, F, B, chunk=1 << 24)
+    b = print_objective(V, F, B, chunk=len(F))  # one direction per block
+    for x, y in ((a.WQ, b.WQ), (a.WU, b.WU), (a.support_volume, b.support_volume)):
+        np.testing.assert_allclose(x, y, rtol=1e-10, atol=1e-8)
+    # translation does not change anything
+    c = print_objective(V + [500.0, -300.0, 1000.0], F, B)
+    np.testing.assert_allclose(a.objective, c.objective, rtol=1e-8)
+
+
+def test_flat_plate_stands_on_edge():
+    """Eq. 6-1: a plate is best printed with its normal perpendicular to b (WQ = 0, no overhang)."""
+    V, F = grid(10, 10, 100.0)
+    r = orient(V, F)
+    assert abs(r.direction @ Z) < 1e-6
+    assert r.WQ < 1e-6 and r.WU == 0.0 and r.support_volume == 0.0
+    flat_down = print_objective(V, F, Z).objective[0]
+    assert flat_down == pytest.approx(0.2 * 100 * 100)
+
+
+def test_open_hemisphere_prints_rim_down():
+    V, F = spherical_cap(50.0, 90.0, 3)  # outward normals, open at z = 0
+    r = orient(V, F)
+    up, down = print_objective(V, F, [Z, -Z]).objective
+    assert r.direction[2] > 0.6  # the opening faces the plate
+    assert r.WU < 1e-9 * r.objective and r.support_volume < 1e-9 * r.objective
+    assert r.objective <= up * (1 + 1e-9)
+    assert down > 10 * r.objective  # rim up: the whole outside needs support
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_rotated_box_comes_back_face_down(seed):
+    V, F = box((40.0, 30.0, 20.0), 4)
+    R = _random_rotation(seed)
+    r = orient(V @ R.T, F)
+    normals = R.T  # rows: the rotated box axes
+    assert np.abs(normals @ r.direction).max() > 1 - 1e-9
+    # the smallest side (30 x 20) on the plate: WQ = h * 2 * 600, nothing overhangs above the plate
+    assert r.WQ == pytest.approx(0.2 * 2 * 600.0, rel=1e-9)
+    assert r.WU < 1e-6 and abs(abs(r.direction @ R[:, 0]) - 1) < 1e-9
+
+
+@pytest.mark.parametrize("which", ["torus", "dome", "face_part"])
+def test_search_is_within_one_percent_of_a_dense_random_search(which):
+    if which == "torus":
+        V, F = torus(60.0, 20.0, 32, 12)
+        V = V @ _random_rotation(7).T
+    elif which == "dome":
+        V, F, _ = sheet_with_dome(n_sheet=8, n_dome=8, na=32)
+        V = V @ _random_rotation(8).T
+    else:
+        V, F, _ = load_obj(ASSETS / "ict_face_narrow.obj", scale=10.0)  # cm -> mm
+        keep = V[F].mean(axis=1)[:, 1] > np.percentile(V[:, 1], 60)  # the upper part of the face
+        F = F[keep]
+    r = orient(V, F, rng=0)
+    B = np.random.default_rng(12345).standard_normal((20_000, 3))
+    dense = print_objective(V, F, B).objective.min()
+    assert r.objective <= 1.01 * dense
+    assert r.evaluations < 2000  # far fewer exact evaluations than the dense search
+    again = print_objective(V, F, r.direction)
+    assert again.objective[0] == pytest.approx(r.objective, rel=1e-9)
+    assert again.support_volume[0] == pytest.approx(r.support_volume, rel=1e-9, abs=1e-9)
+
+
+def test_favour_keeps_the_favoured_side_up():
+    V, F = spherical_cap(50.0, 90.0, 3)
+    r = orient(V, F, favour=-Z)  # the inside of the cap must not look down
+    assert r.direction @ -Z >= -1e-9
+    assert r.objective > orient(V, F).objective  # the constraint costs something here
+    r2 = orient(V, F, favour=-Z, favour_min_cos=0.5)
+    assert r2.direction @ -Z >= 0.5 - 1e-9
+
+
+def test_rotation_to_z_and_placement():
+    rng = np.random.default_rng(0)
+    dirs = list(rng.standard_normal((20, 3))) + [Z, -Z, [1e-12, 0, -1], [0, 1e-9, 1], [1, 0, 0]]
+    for b in dirs:
+        b = np.asarray(b, float)
+        R = rotation_to_z(b)
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+        assert np.linalg.det(R) == pytest.approx(1.0)
+        np.testing.assert_allclose(R @ (b / np.linalg.norm(b)), Z, atol=1e-12)
+    V, F = icosphere(2, 30.0)
+    V = V * [1.0, 2.0, 0.5] + [10.0, -20.0, 300.0]
+    b = np.array([0.3, -0.5, 0.8])
+    W, R, t = place_on_plate(V, b)
+    assert W[:, 2].min() == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_allclose(W, V @ R.T + t)
+    np.testing.assert_allclose(MeshTopology(W, F).edge_lengths, MeshTopology(V, F).edge_lengths, rtol=1e-12)
+    # the chosen direction becomes +Z: the objective of the placed mesh at +Z is unchanged
+    assert print_objective(W, F, Z).objective[0] == pytest.approx(print_objective(V, F, b).objective[0], rel=1e-9)
+
+
+def test_normal_curvature_on_spheres_and_planes():
+    V, F = icosphere(3, 40.0)
+    k = normal_curvature(V, F)
+    np.testing.assert_allclose(k.vertex, -1 / 40.0, rtol=0.02)  # convex, outward normals: negative
+    np.testing.assert_allclose(k.face, -1 / 40.0, rtol=0.02)  # eq. 6-18
+    assert not k.concave().any()  # eq. 6-19
+    inside = normal_curvature(V, F[:, ::-1])
+    np.testing.assert_allclose(inside.face, 1 / 40.0, rtol=0.02)
+    assert inside.concave(0.01).all()
+    assert ((k.face_normalised >= 0) & (k.face_normalised <= 1)).all()  # eq. 6-20
+    Vg, Fg = grid(6, 6, 60.0, jitter=0.2)
+    assert np.abs(normal_curvature(Vg, Fg).vertex).max() < 1e-12
+
+
+def test_orient_parts_orients_each_part_alone():
+    V, F = box((40.0, 30.0, 20.0), 3)
+    C = V[F].mean(axis=1)
+    labels = (C[:, 0] > 20).astype(int)  # two open halves
+    res = orient_parts(V, F, labels)
+    assert len(res) == 2
+    for i, r in enumerate(res):
+        Fi = F[labels == i]
+        assert r.objective == pytest.approx(print_objective(V, Fi, r.direction).objective[0], rel=1e-9)
+    with pytest.raises(BolusError):
+        orient_parts(V, F, labels[:-1])
+
+
+def test_bad_input_is_refused():
+    V, F = grid(2, 2, 10.0)
+    with pytest.raises(BolusError, match="zero area"):
+        orient(np.zeros_like(V), F)
+    with pytest.raises(BolusError, match="no faces"):
+        orient(V, np.zeros((0, 3), dtype=int))
+    with pytest.raises(BolusError):
+        print_objective(V, F, [0.0, 0.0, 0.0])
+    with pytest.raises(BolusError):
+        orient(V, F, h=0.0)
+    with pytest.raises(BolusError):
+        orient(V, F, favour=[0.0, 0.0, 0.0])
+    with pytest.raises(BolusError):
+        rotation_to_z([np.nan, 0, 1])
+    with pytest.raises(ValueError):  # BolusError is a ValueError
+        orient(V, F[:, :2])
