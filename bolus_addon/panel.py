@@ -8,6 +8,7 @@ import bpy
 from .cut_ops import PROP_CUT_TABLE
 from .operators import PROP_FLV, PROP_PATCH_TABLE, PROP_SUM_VARPI
 from .pattern_ops import PATTERN_SUFFIX, PROP_PATTERN_TABLE
+from .print_ops import PROP_ORIENT_TABLE, PROP_PART_SOURCE, PROP_PRINT_TABLE
 
 
 class VIEW3D_PT_bolus(bpy.types.Panel):
@@ -101,6 +102,43 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
         box.prop(s, "seam_allowance_mm", text="Seam allowance (mm)")
         op = box.operator("bolus.export_pattern", icon="EXPORT")
         op.seam_allowance_mm = s.seam_allowance_mm
+
+        box = layout.box()
+        box.label(text="4. 3D print", icon="MOD_BUILD")
+        row = box.row(align=True)
+        row.prop(s, "parts")
+        row.prop(s, "print_method", text="")
+        op = box.operator("bolus.print_segment", icon="MOD_EXPLODE")
+        op.parts, op.method, op.seed = s.parts, s.print_method, s.seed
+        src = obj
+        if obj is not None and PROP_PART_SOURCE in obj:
+            src = bpy.data.objects.get(obj[PROP_PART_SOURCE], obj)
+        if src is not None and PROP_PRINT_TABLE in src:
+            try:
+                t = json.loads(src[PROP_PRINT_TABLE])
+                box.label(text=f"{len(t['parts'])} parts, largest/smallest area {t['area_balance']:.2f}")
+            except (ValueError, TypeError, KeyError):
+                pass
+        row = box.row(align=True)
+        row.prop(s, "layer_mm", text="Layer (mm)")
+        row.prop(s, "skin_side_up")
+        op = box.operator("bolus.orient_parts", icon="ORIENTATION_GIMBAL")
+        op.layer_mm, op.skin_side_up = s.layer_mm, s.skin_side_up
+        if src is not None and PROP_ORIENT_TABLE in src:
+            try:
+                t = json.loads(src[PROP_ORIENT_TABLE])
+            except (ValueError, TypeError):
+                t = None
+            if t:
+                grid = box.grid_flow(row_major=True, columns=5, even_columns=True, align=True)
+                for head in ("Part", "Tris", "WQ mm³", "WU mm³", "Support"):
+                    grid.label(text=head)
+                for r in t["rows"]:
+                    for val in (r["part"], str(r["faces"]), f"{r['WQ']:.0f}", f"{r['WU']:.0f}", f"{r['support_volume_mm3']:.0f}"):
+                        grid.label(text=val)
+                if t.get("support_ratio") is not None:
+                    box.label(text=f"Parts' support: {t['support_ratio'] * 100:.0f} % of the whole model's")
+        box.operator("bolus.export_parts", icon="EXPORT")
 
 
 classes = (VIEW3D_PT_bolus,)

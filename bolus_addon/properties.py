@@ -84,6 +84,38 @@ def seam_allowance_property(**kw):
                          default=0.0, min=0.0, soft_max=20.0, **kw)
 
 
+PRINT_METHODS = [
+    ("ABCUT", "ABcut", "Area-balanced spectral cut (seed 6.2): parts of similar area (default)"),
+    ("RATIOCUT", "RatioCut", "Plain spectral cut, the seed's 'traditional method' (for comparison)"),
+]
+
+
+def parts_property(**kw):
+    return IntProperty(name="Parts", description="Number of print parts to split the bolus into", default=3, min=1,
+                       max=64, soft_max=8, **kw)
+
+
+def print_method_property(**kw):
+    return EnumProperty(name="Cut", items=PRINT_METHODS, default="ABCUT", **kw)
+
+
+def layer_property(**kw):
+    return FloatProperty(name="Layer height", description="Printer layer height in mm (cusp height, eq. 6-1)",
+                         default=0.2, min=0.01, soft_max=1.0, precision=2, **kw)
+
+
+def skin_side_up_property(**kw):
+    return BoolProperty(
+        name="Skin side up",
+        description=(
+            "Only print directions that keep the skin-contact side (the side the surface normals point away "
+            "from) facing up, so no support touches it"
+        ),
+        default=False,
+        **kw,
+    )
+
+
 class BolusSettings(bpy.types.PropertyGroup):
     smoothing_mm: smoothing_property()
     color_by: color_by_property()
@@ -95,3 +127,7 @@ class BolusSettings(bpy.types.PropertyGroup):
     refine: refine_property()
     gap_mm: gap_property()
     seam_allowance_mm: seam_allowance_property()
+    parts: parts_property()
+    print_method: print_method_property()
+    layer_mm: layer_property()
+    skin_side_up: skin_side_up_property()

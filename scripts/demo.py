@@ -13,6 +13,9 @@ in a scene where 1 unit = 1 mm, selects the treatment area around the nose in Ed
                               close-ups before and after: cuts_before.png, cuts_after.png)
 4. bolus.unfold            -> out/pattern.png (the flat pattern, coloured by area distortion)
 5. bolus.export_pattern    -> out/pattern.svg (true scale: print at 100 %)
+6. bolus.print_segment, bolus.orient_parts, bolus.export_parts
+                           -> out/parts/*.stl (binary, mm), out/parts.png (the parts
+                              on the build plate, overhangs in red)
 
 and writes out/demo.blend and the per-patch tables (out/report.json, out/report.txt).
 """
@@ -40,6 +43,7 @@ def parse_args():
     ap.add_argument("--out", default=str(ROOT / "out"), help="output folder (created)")
     ap.add_argument("--radius", type=float, default=45.0, help="treatment area: faces within this many mm of the nose tip")
     ap.add_argument("--patches", type=int, default=4)
+    ap.add_argument("--parts", type=int, default=3, help="print parts")
     ap.add_argument("--smoothing", type=float, default=None, help="analysis smoothing in mm (default: the add-on's)")
     ap.add_argument("--resolution", type=int, default=900, help="PNG height in pixels")
     return ap.parse_args(argv)
@@ -179,6 +183,45 @@ def render_pattern(face: bpy.types.Object, pattern: bpy.types.Object, path: Path
     face.hide_render = False
 
 
+def render_parts(hide: list, parts: list, path: Path) -> None:
+    """Front view of the oriented print parts on the plate (z = 0), overhang faces in red."""
+    from bolus_addon.mesh_io import show_colors
+
+    scene = bpy.context.scene
+    for ob in hide:
+        ob.hide_render = True
+    pts = []
+    for ob in parts:
+        show_colors(ob.data, "bolus_overhang")
+        pts += [ob.matrix_world @ v.co for v in ob.data.vertices]
+    pts = np.array(pts)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    # the build plate under the parts, for the picture only
+    pad = 0.1 * float(max(hi[0] - lo[0], hi[1] - lo[1]))
+    plate_me = bpy.data.meshes.new("build_plate")
+    x0, x1, y0, y1 = lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad
+    plate_me.from_pydata([(x0, y0, 0), (x1, y0, 0), (x1, y1, 0), (x0, y1, 0)], [], [(0, 1, 2, 3)])
+    plate = bpy.data.objects.new("build_plate", plate_me)
+    scene.collection.objects.link(plate)
+    cam = scene.camera
+    old = (tuple(cam.location), tuple(cam.rotation_euler), cam.data.ortho_scale)
+    tilt = 0.5  # look down onto the plate
+    centre = (lo + hi) / 2
+    dist = 5.0 * float(np.linalg.norm(hi - lo))
+    cam.rotation_euler = (np.pi / 2 - tilt, 0.0, 0.0)
+    cam.location = (float(centre[0]), float(centre[1] - dist * np.cos(tilt)), float(centre[2] + dist * np.sin(tilt)))
+    rx, ry = scene.render.resolution_x, scene.render.resolution_y
+    w, h = float(hi[0] - lo[0]), float(hi[2] - lo[2] + (hi[1] - lo[1]) * np.sin(tilt))
+    cam.data.ortho_scale = (max(w, h * rx / ry) if rx >= ry else max(h, w * ry / rx)) * 1.15
+    scene.render.filepath = str(path)
+    bpy.ops.render.render(write_still=True)
+    cam.location, cam.rotation_euler, cam.data.ortho_scale = old
+    bpy.data.objects.remove(plate, do_unlink=True)
+    bpy.data.meshes.remove(plate_me)
+    for ob in hide:
+        ob.hide_render = False
+
+
 def run_op(op, **kw) -> float:
     t = time.perf_counter()
     result = op(**kw)
@@ -212,6 +255,23 @@ def main():
     pattern = bpy.data.objects[obj.name + "_pattern"]
     pattern_table = json.loads(pattern["bolus_pattern_table"])
 
+    # 3D printing: the treatment area (after the cuts) split into parts of balanced area,
+    # each turned to its own best print direction and written as an STL
+    from bolus_addon.mesh_io import read_face_labels
+
+    bpy.context.view_layer.objects.active = obj
+    obj.data.polygons.foreach_set("select", read_face_labels(obj.data, "bolus_patch") >= 0)
+    bpy.ops.object.mode_set(mode="EDIT")
+    t_prs = run_op(bpy.ops.bolus.print_segment, parts=args.parts, method="ABCUT", seed=0)
+    t_ori = run_op(bpy.ops.bolus.orient_parts)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    (out / "parts").mkdir(exist_ok=True)
+    t_stl = run_op(bpy.ops.bolus.export_parts, directory=str((out / "parts").resolve()))
+    orient_table = json.loads(obj["bolus_orient_table"])
+    from bolus_addon.print_ops import part_objects
+
+    parts = part_objects(obj.name)
+
     table = json.loads(obj["bolus_patch_table"])
     report = {
         "mesh": EXAMPLE.name,
@@ -222,8 +282,11 @@ def main():
         "segment": jagged_table,
         "smooth_cuts": {"borders": cuts, "patches": table["patches"]},
         "pattern": pattern_table,
+        "print": {"segment": json.loads(obj["bolus_print_table"]), "orient": orient_table,
+                  "stl": sorted(p.name for p in (out / "parts").glob("*.stl"))},
         "seconds": {"saliency_preview": round(t_sal, 3), "segment": round(t_seg, 3), "smooth_cuts": round(t_cut, 3),
-                    "unfold": round(t_unf, 3),
+                    "unfold": round(t_unf, 3), "print_segment": round(t_prs, 3), "orient_parts": round(t_ori, 3),
+                    "export_parts": round(t_stl, 3),
                     "export_pattern": round(t_svg, 3)},
     }
     (out / "report.json").write_text(json.dumps(report, indent=2))
@@ -255,12 +318,22 @@ def main():
     lines.append(f"{'patch':>5} {'triangles':>10} {'EL %':>7} {'EA %':>7} {'flipped':>8}  cut")
     for r in pattern_table["islands"]:
         lines.append(f"{r['patch']:>5} {r['faces']:>10} {r['EL'] * 100:>7.3f} {r['EA'] * 100:>7.3f} {r['flipped']:>8}  {r['cut']}")
+    lines.append(f"3D print: {len(parts)} parts (ABcut), layer {orient_table['layer_mm']:g} mm, overhang beyond 45 degrees "
+                 "(Tables 6-1, 6-2; mm3)")
+    lines.append(f"{'':>8} {'triangles':>10} {'area cm2':>9} {'WQ':>9} {'WU':>9} {'support':>9}  build direction")
+    for r in orient_table["rows"]:
+        d = r["direction"]
+        lines.append(f"{r['part']:>8} {r['faces']:>10} {r['area_mm2'] / 100:>9.1f} {r['WQ']:>9.1f} {r['WU']:>9.1f} "
+                     f"{r['support_volume_mm3']:>9.1f}  ({d[0]:+.2f}, {d[1]:+.2f}, {d[2]:+.2f})")
+    if orient_table.get("support_ratio") is not None:
+        lines.append(f"support of the parts = {orient_table['support_ratio'] * 100:.0f} % of the whole model's")
     (out / "report.txt").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
     render_pattern(obj, pattern, out / "pattern.png")
+    render_parts([obj, pattern], parts, out / "parts.png")
     bpy.ops.wm.save_as_mainfile(filepath=str((out / "demo.blend").resolve()))
-    print(f"wrote {out}/demo.blend, saliency.png, patches.png, cuts.png, cuts_before.png, cuts_after.png, pattern.png, pattern.svg, report.json, report.txt")
+    print(f"wrote {out}/demo.blend, saliency.png, patches.png, cuts.png, cuts_before.png, cuts_after.png, pattern.png, parts.png, pattern.svg, parts/*.stl, report.json, report.txt")
 
 
 if __name__ == "__main__":
