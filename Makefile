@@ -36,6 +36,8 @@ test-core: $(VENV)/.installed
 bench: $(VENV)/.installed
 	$(PY) bench/segment_bench.py
 	$(PY) bench/unfold_bench.py
+	$(PY) bench/cuts_bench.py
+	$(PY) bench/print_bench.py
 
 extension: $(VENV)/.installed
 	mkdir -p dist

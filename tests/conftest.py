@@ -125,3 +125,27 @@ def enter_edit_mode_with_faces(bpy, ob, mask: np.ndarray) -> None:
     bm.faces.ensure_lookup_table()
     got = np.array([f.select for f in bm.faces])
     assert np.array_equal(got, mask), "test setup: the Edit Mode selection is not the one asked"
+
+
+def loop_edges_polys(me) -> tuple[np.ndarray, np.ndarray]:
+    """(edge index, polygon index) of every corner."""
+    le = np.empty(len(me.loops), dtype=np.int64)
+    me.loops.foreach_get("edge_index", le)
+    lp = np.empty(len(me.loops), dtype=np.int64)
+    for p in me.polygons:
+        lp[p.loop_start : p.loop_start + p.loop_total] = p.index
+    return le, lp
+
+
+def edge_verts(me) -> np.ndarray:
+    """(e,2) vertex indices of every edge."""
+    ev = np.empty(len(me.edges) * 2, dtype=np.int64)
+    me.edges.foreach_get("vertices", ev)
+    return ev.reshape(-1, 2)
+
+
+def seams(me) -> np.ndarray:
+    """(e,) bool use_seam of every edge."""
+    s = np.empty(len(me.edges), dtype=bool)
+    me.edges.foreach_get("use_seam", s)
+    return s

@@ -19,7 +19,17 @@ import json
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from conftest import ASSETS, attr_array, enter_edit_mode_with_faces, import_obj, make_object, mesh_snapshot
+from conftest import (
+    ASSETS,
+    attr_array,
+    edge_verts,
+    enter_edit_mode_with_faces,
+    import_obj,
+    loop_edges_polys,
+    make_object,
+    mesh_snapshot,
+    seams,
+)
 from scipy.sparse.csgraph import connected_components
 
 pytestmark = pytest.mark.blender
@@ -115,31 +125,9 @@ def mesh_size(me) -> float:
     return float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
 
 
-def edge_polygons(me) -> tuple[np.ndarray, np.ndarray]:
-    """(edge index, polygon index) of every corner."""
-    le = np.empty(len(me.loops), dtype=np.int64)
-    me.loops.foreach_get("edge_index", le)
-    lp = np.empty(len(me.loops), dtype=np.int64)
-    for p in me.polygons:
-        lp[p.loop_start : p.loop_start + p.loop_total] = p.index
-    return le, lp
-
-
-def edge_verts(me) -> np.ndarray:
-    ev = np.empty(len(me.edges) * 2, dtype=np.int64)
-    me.edges.foreach_get("vertices", ev)
-    return ev.reshape(-1, 2)
-
-
-def seams(me) -> np.ndarray:
-    s = np.empty(len(me.edges), dtype=bool)
-    me.edges.foreach_get("use_seam", s)
-    return s
-
-
 def between_patches(me, labels) -> np.ndarray:
     """(e,) bool: edges whose polygons carry different labels."""
-    le, lp = edge_polygons(me)
+    le, lp = loop_edges_polys(me)
     lab = np.asarray(labels)[lp]
     ne = len(me.edges)
     lo = np.full(ne, np.iinfo(np.int64).max)
@@ -151,7 +139,7 @@ def between_patches(me, labels) -> np.ndarray:
 
 def border_vertices(me, labels, a=None, b=None) -> np.ndarray:
     """Vertices on edges between patches (a and b if given)."""
-    le, lp = edge_polygons(me)
+    le, lp = loop_edges_polys(me)
     lab = np.asarray(labels)[lp]
     out = set()
     E = edge_verts(me)
@@ -164,7 +152,7 @@ def border_vertices(me, labels, a=None, b=None) -> np.ndarray:
 
 def assert_patches_connected(me, labels) -> None:
     """Each patch is one piece through shared edges (scipy connected_components)."""
-    le, lp = edge_polygons(me)
+    le, lp = loop_edges_polys(me)
     order = np.argsort(le, kind="stable")
     le, lp = le[order], lp[order]
     same = (le[1:] == le[:-1]) & (labels[lp[1:]] == labels[lp[:-1]])
@@ -320,7 +308,7 @@ def test_straight_border_on_quad_grid(bpy_addon, scene):
     col = np.empty(len(me.loops) * 4)
     me.color_attributes["bolus_patch_color"].data.foreach_get("color", col)
     col = col.reshape(-1, 4)
-    _, lp = edge_polygons(me)
+    _, lp = loop_edges_polys(me)
     c0, c1 = col[lab[lp] == 0], col[lab[lp] == 1]
     assert np.ptp(c0, axis=0).max() == 0 and np.ptp(c1, axis=0).max() == 0 and not np.allclose(c0[0], c1[0])
     # the report

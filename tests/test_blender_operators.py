@@ -16,6 +16,9 @@ import pytest
 from conftest import (
     ASSETS,
     attr_array,
+    edge_verts,
+    loop_edges_polys,
+    seams,
     enter_edit_mode_with_faces,
     import_obj,
     load_extension_package,
@@ -65,28 +68,6 @@ def loop_triangles(me) -> tuple[np.ndarray, np.ndarray]:
     me.loop_triangles.foreach_get("vertices", tv)
     me.loop_triangles.foreach_get("polygon_index", tp)
     return tv.reshape(-1, 3), tp
-
-
-def loop_edges_polys(me) -> tuple[np.ndarray, np.ndarray]:
-    """(edge index, polygon index) of every corner."""
-    le = np.empty(len(me.loops), dtype=np.int64)
-    me.loops.foreach_get("edge_index", le)
-    lp = np.empty(len(me.loops), dtype=np.int64)
-    for p in me.polygons:
-        lp[p.loop_start : p.loop_start + p.loop_total] = p.index
-    return le, lp
-
-
-def edge_verts(me) -> np.ndarray:
-    ev = np.empty(len(me.edges) * 2, dtype=np.int64)
-    me.edges.foreach_get("vertices", ev)
-    return ev.reshape(-1, 2)
-
-
-def seams(me) -> np.ndarray:
-    s = np.empty(len(me.edges), dtype=bool)
-    me.edges.foreach_get("use_seam", s)
-    return s
 
 
 def raw_varpi(V: np.ndarray, T: np.ndarray, n: int) -> np.ndarray:
