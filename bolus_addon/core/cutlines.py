@@ -51,8 +51,9 @@ than max(3 h, 15 % of the border length) from the border (symmetric Hausdorff
 distance, so a patch that would shrink away is caught too), or the result breaks a rule (the cut leaves the band,
 a patch falls apart or vanishes, a jagged piece of border remains, the cut would
 turn more than the border did), we try a planar
-section for a closed loop (a ring around a limb: Gamma = least-squares plane of the
-loop, S = Gamma), then a *smoothed path along the surface*: the zero set of the
+section (S = a plane: for a loop around a limb, or an arc, the least-squares plane of
+the border; for a nearly straight open border, the plane through its line and the
+mean surface normal), then a *smoothed path along the surface*: the zero set of the
 patch indicator diffused on the surface (two MBO steps: implicit heat step, threshold,
 heat step again; a short curve-shortening flow of the border), over a diffusion
 length of 2 mean border edges, or 3.5 or 6 when the shorter one still turns more
@@ -795,16 +796,24 @@ def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: 
             reasons.append(str(exc))
     else:
         reasons.append("the surface folds too much around the border for a plane projection")
-    if border.order is not None and border.closed and not height_field:
+    if border.order is not None and not height_field:
+        # a plane section: for a loop around a limb its least-squares plane; for an open
+        # border the same when its nodes spread in two directions (an arc), else the
+        # plane through its line and the mean surface normal (a normal section)
         P = st.V[border.order]
         c = P.mean(axis=0)
         _, sv, Vt = np.linalg.svd(P - c, full_matrices=False)
         nrm = Vt[2]
+        if not border.closed and sv[1] < 0.2 * sv[0] and dn > 0:
+            nrm = np.cross(Vt[0], d / dn)
+            nrm = nrm / max(np.linalg.norm(nrm), 1e-300)
         dev = float(np.abs((P - c) @ nrm).max())
         if dev <= limit:
-            attempts.append(("plane section", lambda Q, c=c, nrm=nrm: (Q - c) @ nrm, True, max(3.0 * h, 2.0 * dev + 2.0 * h), float(np.sqrt(np.mean(((P - c) @ nrm) ** 2)))))
+            rms_p = float(np.sqrt(np.mean(((P - c) @ nrm) ** 2)))
+            attempts.append(("plane section", lambda Q, c=c, nrm=nrm: (Q - c) @ nrm, True,
+                             max(3.0 * h, 2.0 * dev + 2.0 * h), rms_p))
         else:
-            reasons.append(f"the loop is {dev:.1f} mm away from planar")
+            reasons.append(f"the border is {dev:.1f} mm away from a plane")
     for sigma_edges in MBO_SIGMA_EDGES:
         sigma = sigma_edges * h
         attempts.append(("smoothed path", sigma, True, 4.0 * sigma + 2.0 * h, 0.0))
