@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 from conftest import ASSETS
-from meshgen import box, grid, icosphere, sheet_with_dome, spherical_cap, torus
+from meshgen import box, grid, icosphere, ring_surface, sheet_with_dome, spherical_cap, torus
 
 from bolus_addon.core.errors import BolusError
 from bolus_addon.core.objfile import load_obj
@@ -94,6 +94,21 @@ def test_open_hemisphere_prints_rim_down():
     assert r.WU < 1e-9 * r.objective and r.support_volume < 1e-9 * r.objective
     assert r.objective <= up * (1 + 1e-9)
     assert down > 10 * r.objective  # rim up: the whole outside needs support
+
+
+def test_clean_hemisphere_prints_exactly_rim_down():
+    # a hemisphere whose rim lies exactly in z = 0: WQ = h pi R^2 in every direction, so
+    # every direction of the no-overhang cone ties; the lowest print is rim down
+    phi = np.linspace(0.0, np.pi / 2, 13)[:-1]
+    profile = np.stack([50.0 * np.cos(phi), 50.0 * np.sin(phi)], 1)  # (r, z) from the rim up
+    V, F, _ = ring_surface(profile, na=64, pole=True)
+    V[-1] = [0.0, 0.0, 50.0]
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    if (n * (V[F].mean(1))).sum() < 0:  # outward normals
+        F = F[:, ::-1]
+    r = orient(V, F)
+    assert r.direction[2] > 0.999
+    assert r.WU < 1e-9 * r.objective
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])

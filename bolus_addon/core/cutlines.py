@@ -50,7 +50,8 @@ more than ~78 degrees away from d), or the fitted curve or the new cut strays mo
 than max(3 h, 15 % of the border length) from the border (symmetric Hausdorff
 distance, so a patch that would shrink away is caught too), or the result breaks a rule (the cut leaves the band,
 a patch falls apart or vanishes, a jagged piece of border remains, the cut would
-turn more than the border did), we try a planar
+turn more than the border did; a valid cut that still turns more than 30 % of the
+border is kept only if no later one does better), we try a planar
 section (S = a plane: for a loop around a limb, or an arc, the least-squares plane of
 the border; for a nearly straight open border, the plane through its line and the
 mean surface normal), then a *smoothed path along the surface*: the zero set of the
@@ -838,10 +839,12 @@ def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: 
                 reasons.append(f"{name}: the cut would not be smoother than the border")
                 continue
             result = (new_st, name, len1, turn1, shift, rms)
-            if name == "smoothed path" and turn1 > SMOOTH_ENOUGH * turn0:
-                # try a longer diffusion; keep the smoothest valid one meanwhile
+            if turn1 > SMOOTH_ENOUGH * turn0:
+                # valid but still turning: try the next cut (or a longer diffusion) and
+                # keep the smoothest valid one meanwhile
                 if fallback is None or turn1 < fallback[3]:
                     fallback = result
+                reasons.append(f"{name}: turns {turn1 / turn0:.0%} of the border")
                 break
             return _accept(report, result, reasons)
     if fallback is not None:
@@ -857,8 +860,9 @@ def _accept(report: BorderReport, result, reasons: list[str]):
     report.turning_after = turn1
     report.max_shift_mm = shift
     report.fit_rms_mm = rms
-    if name == "smoothed path" and reasons:
-        report.note = "fell back to a smoothed path along the surface: " + "; ".join(dict.fromkeys(reasons))
+    if reasons:
+        report.note = ("fell back to a smoothed path along the surface: " if name == "smoothed path" else "") + "; ".join(
+            dict.fromkeys(reasons))
     return new_st, report
 
 

@@ -87,6 +87,7 @@ __all__ = [
 
 LAYER_MM = 0.2
 CRITICAL_ANGLE_DEG = 45.0
+TIE_REL = 5e-3  #: objectives within 0.5 % of the best count as equal; the lowest print wins (SPEC allows 1 %)
 DEFAULT_CHUNK = 1 << 18  # floats per (faces x directions) block of print_objective
 
 _GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
@@ -584,6 +585,17 @@ def orient(
     report(0.95, "figures")
     if not np.isfinite(best_f):
         raise BolusError("no allowed build direction: the favoured side cannot be kept off the plate")
+    # ties: among the directions evaluated exactly whose objective is within TIE_REL of
+    # the best (a symmetric part has whole families of them, e.g. every direction in the
+    # no-overhang cone of a hemisphere), take the one that makes the lowest print
+    pool_b = np.vstack([Bc, special, best_b[None]] + [b[None] for b, _ in cur])
+    pool_f = np.r_[fc, f_exact(special), best_f, [fb for _, fb in cur]]
+    tie = np.isfinite(pool_f) & (pool_f <= best_f * (1.0 + TIE_REL) + 1e-12)
+    if tie.sum() > 1:
+        H = _hull_points(topo.V[topo.used_vertices])
+        proj = H @ pool_b[tie].T
+        height = proj.max(axis=0) - proj.min(axis=0)
+        best_b = pool_b[tie][int(np.argmin(height))].copy()
     WQ, WU, SV = exact.evaluate(best_b[None], h, cos_c)
     evaluations += 1
     report(1.0, "done")
