@@ -588,12 +588,14 @@ def orient(
     # ties: among the directions evaluated exactly whose objective is within TIE_REL of
     # the best (a symmetric part has whole families of them, e.g. every direction in the
     # no-overhang cone of a hemisphere), take the one that makes the lowest print
-    pool_b = np.vstack([Bc, special, best_b[None]] + [b[None] for b, _ in cur])
-    pool_f = np.r_[fc, f_exact(special), best_f, [fb for _, fb in cur]]
+    # (special directions are few and may have been screened out as equals: those whose
+    # screened value is near the best are evaluated exactly too)
+    near_sp = special[f_coarse[len(Bfib):] <= best_f * (1.0 + 4.0 * TIE_REL) + 1e-12]
+    pool_b = np.vstack([Bc, near_sp, best_b[None]] + [b[None] for b, _ in cur])
+    pool_f = np.r_[fc, f_exact(near_sp), best_f, [fb for _, fb in cur]]
     tie = np.isfinite(pool_f) & (pool_f <= best_f * (1.0 + TIE_REL) + 1e-12)
     if tie.sum() > 1:
-        H = _hull_points(topo.V[topo.used_vertices])
-        proj = H @ pool_b[tie].T
+        proj = exact.H @ pool_b[tie].T  # hull vertices: the height is translation invariant
         height = proj.max(axis=0) - proj.min(axis=0)
         best_b = pool_b[tie][int(np.argmin(height))].copy()
     WQ, WU, SV = exact.evaluate(best_b[None], h, cos_c)
