@@ -240,12 +240,23 @@ def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.n
 
     Polygons whose triangles were split (or got different labels) are replaced by the
     result's triangles; every other polygon keeps its vertices, corners and data.  New
-    vertices and corners get their attributes (UVs, colours, vertex groups, ...)
-    interpolated by Blender from the polygon they lie in (``copy_from_face_interp``),
-    new edges along a split edge copy that edge's data (seams, sharpness, creases);
-    ``label_attr`` (a FACE INT attribute) is set from ``res.labels``.
+    vertices get their data (vertex groups, point attributes) interpolated by Blender
+    from the polygon they lie in (``BMVert.copy_from_face_interp``); the corners of the
+    new faces (UV maps, corner colours and other corner attributes) are interpolated
+    here with the barycentric weights of the result in the input triangle they lie in
+    (`_interpolate_corners`: ``BMLoop/BMFace.copy_from_face_interp`` raise a SystemError
+    in Blender 4.2); new edges along a split edge copy that edge's data (seams,
+    sharpness, creases); ``label_attr`` (a FACE INT attribute) is set from
+    ``res.labels``.  Needs the region of the whole mesh (``read_region(whole=True)``).
     """
     import bmesh
+
+    me.calc_loop_triangles()
+    tri_loops = _get(me.loop_triangles, "loops", len(me.loop_triangles), np.int64, 3)
+    if len(tri_loops) != len(region.F):
+        raise BolusError("internal error: apply_cuts needs the whole mesh as its region")
+    corner_data = _corner_attributes(me)
+    nv_old = len(me.vertices)
 
     npoly = len(me.polygons)
     tri_poly = region.tri_poly
@@ -282,13 +293,13 @@ def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.n
         for f in np.nonzero(~replaced & (hi != np.iinfo(np.int64).min))[0]:
             faces[int(f)][layer] = int(poly_label[f])
         new_faces = np.nonzero(replaced[out_poly])[0]
+        created = []
         for k in new_faces.tolist():
             src_face = faces[int(out_poly[k])]
             tri = [int(i) for i in res.F[k]]
             f = bm.faces.new([vmap[i] for i in tri], src_face)
-            for loop in f.loops:
-                loop.copy_from_face_interp(src_face, False, False)  # (face, vert, multires)
             f[layer] = int(res.labels[k])
+            created.append(f)
             for a, b in ((0, 1), (1, 2), (2, 0)):
                 sa, sb = support[tri[a]], support[tri[b]]
                 both = sa | sb
@@ -303,8 +314,77 @@ def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.n
         for e in old_edges:
             if e.is_valid and not e.link_faces:
                 bm.edges.remove(e)
+        bm.faces.index_update()
+        created_index = np.array([f.index for f in created], dtype=np.int64)
         bm.to_mesh(me)
     finally:
         bm.free()
+    _interpolate_corners(me, region, res, new_faces, created_index, tri_loops, corner_data, nv_old)
     me.update()
     return read_face_labels(me, label_attr)
+
+
+_CORNER_WIDTH = {"FLOAT": 1, "FLOAT2": 2, "FLOAT_VECTOR": 3, "FLOAT_COLOR": 4, "BYTE_COLOR": 4, "INT": 1,
+                 "INT8": 1, "BOOLEAN": 1, "INT32_2D": 2, "QUATERNION": 4}
+_CORNER_KEY = {"FLOAT": "value", "FLOAT2": "vector", "FLOAT_VECTOR": "vector", "FLOAT_COLOR": "color",
+               "BYTE_COLOR": "color", "INT": "value", "INT8": "value", "BOOLEAN": "value", "INT32_2D": "value",
+               "QUATERNION": "value"}
+
+
+def _corner_attributes(me: bpy.types.Mesh) -> dict:
+    """{name: (data_type, values (loops, width))} of the user-visible corner attributes."""
+    out = {}
+    for attr in me.attributes:
+        if attr.domain != "CORNER" or attr.name.startswith(".") or attr.data_type not in _CORNER_WIDTH:
+            continue
+        w = _CORNER_WIDTH[attr.data_type]
+        vals = np.empty(len(me.loops) * w, dtype=np.float64)
+        attr.data.foreach_get(_CORNER_KEY[attr.data_type], vals)
+        out[attr.name] = (attr.data_type, vals.reshape(-1, w))
+    return out
+
+
+def _interpolate_corners(me, region, res, new_faces, created_index, tri_loops, corner_data, nv_old) -> None:
+    """Corner attributes of the new faces from the input triangle each lies in.
+
+    A corner at result vertex j of a face lying in input triangle t gets
+    sum_c w_c * value(corner c of t), w = j's barycentric weights on t's corners;
+    integer and boolean attributes take the value of the corner with the largest weight.
+    """
+    if not corner_data or len(new_faces) == 0:
+        return
+    n_in = len(region.vert_ids)
+    core_of_mesh = np.full(len(me.vertices), -1, dtype=np.int64)
+    core_of_mesh[region.vert_ids] = np.arange(n_in)
+    core_of_mesh[nv_old:] = np.arange(n_in, n_in + len(me.vertices) - nv_old)
+    starts = _get(me.polygons, "loop_start", len(me.polygons), np.int64)[created_index]
+    loop_v = _get(me.loops, "vertex_index", len(me.loops), np.int64)
+    loops = starts[:, None] + np.arange(3)[None, :]  # (q,3) the new triangles' corners
+    j = core_of_mesh[loop_v[loops]]  # (q,3) result vertex of each corner
+    parent = res.face_parent[new_faces]  # (q,) input triangle of each new face
+    corners = region.F[parent]  # (q,3) input (region) vertices of the parent triangle
+    src = res.vert_src[j]  # (q,3,3)
+    w = res.vert_weights[j]
+    W = np.zeros((len(new_faces), 3, 3))  # corner x parent corner
+    for c in range(3):
+        W[:, :, c] = np.where(src == corners[:, None, c, None], w, 0.0).sum(axis=2)
+    W /= np.maximum(W.sum(axis=2, keepdims=True), 1e-300)
+    parent_loops = tri_loops[parent]  # (q,3)
+    for name, (dtype, vals) in corner_data.items():
+        pv = vals[parent_loops]  # (q,3 parent corners, width)
+        if dtype in {"INT", "INT8", "BOOLEAN", "INT32_2D"}:
+            pick = np.argmax(W, axis=2)  # (q,3)
+            new = np.take_along_axis(pv, pick[:, :, None], axis=1)
+        else:
+            new = np.einsum("qcp,qpw->qcw", W, pv)
+        attr = me.attributes[name]
+        out = np.empty(len(me.loops) * vals.shape[1], dtype=np.float64)
+        attr.data.foreach_get(_CORNER_KEY[dtype], out)
+        out = out.reshape(len(me.loops), -1)
+        out[loops.ravel()] = new.reshape(-1, vals.shape[1])
+        if dtype == "BOOLEAN":
+            attr.data.foreach_set("value", out.ravel().astype(bool))
+        elif dtype in {"INT", "INT8", "INT32_2D"}:
+            attr.data.foreach_set("value", np.rint(out.ravel()).astype(np.int32))
+        else:
+            attr.data.foreach_set(_CORNER_KEY[dtype], out.ravel().astype(np.float32))
