@@ -798,23 +798,25 @@ def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: 
     else:
         reasons.append("the surface folds too much around the border for a plane projection")
     if border.order is not None and not height_field:
-        # a plane section: for a loop around a limb its least-squares plane; for an open
-        # border the same when its nodes spread in two directions (an arc), else the
-        # plane through its line and the mean surface normal (a normal section)
+        # plane sections: the least-squares plane of the border (a loop around a limb, an
+        # arc) and, for an open border, the plane through its principal line and the mean
+        # surface normal (a normal section: close to the shortest path across)
         P = st.V[border.order]
         c = P.mean(axis=0)
         _, sv, Vt = np.linalg.svd(P - c, full_matrices=False)
-        nrm = Vt[2]
-        if not border.closed and sv[1] < 0.2 * sv[0] and dn > 0:
-            nrm = np.cross(Vt[0], d / dn)
-            nrm = nrm / max(np.linalg.norm(nrm), 1e-300)
-        dev = float(np.abs((P - c) @ nrm).max())
-        if dev <= limit:
-            rms_p = float(np.sqrt(np.mean(((P - c) @ nrm) ** 2)))
-            attempts.append(("plane section", lambda Q, c=c, nrm=nrm: (Q - c) @ nrm, True,
-                             max(3.0 * h, 2.0 * dev + 2.0 * h), rms_p))
-        else:
-            reasons.append(f"the border is {dev:.1f} mm away from a plane")
+        planes = [Vt[2]] if (border.closed or sv[1] >= 0.2 * sv[0]) else []
+        if not border.closed and dn > 0:
+            ns = np.cross(Vt[0], d / dn)
+            if np.linalg.norm(ns) > 1e-6:
+                planes.append(ns / np.linalg.norm(ns))
+        for nrm in planes:
+            dev = float(np.abs((P - c) @ nrm).max())
+            if dev <= limit:
+                rms_p = float(np.sqrt(np.mean(((P - c) @ nrm) ** 2)))
+                attempts.append(("plane section", lambda Q, c=c, nrm=nrm: (Q - c) @ nrm, True,
+                                 max(3.0 * h, 2.0 * dev + 2.0 * h), rms_p))
+            else:
+                reasons.append(f"the border is {dev:.1f} mm away from a plane")
     for sigma_edges in MBO_SIGMA_EDGES:
         sigma = sigma_edges * h
         attempts.append(("smoothed path", sigma, True, 4.0 * sigma + 2.0 * h, 0.0))
