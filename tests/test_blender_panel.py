@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pytest
 from conftest import make_object
-from meshgen import spherical_cap
+from meshgen import icosphere, spherical_cap
 
 pytestmark = pytest.mark.blender
 
@@ -91,3 +91,22 @@ def test_unfold_invoked_from_a_script_runs_straight_through(bpy_addon, scene):
     co = np.empty(len(pat.data.vertices) * 3)
     pat.data.vertices.foreach_get("co", co)
     assert np.abs(co.reshape(-1, 3)[:, 2]).max() == 0.0
+
+
+def test_panel_shows_the_print_tables(bpy_addon, scene):
+    bpy = bpy_addon
+    V, F = icosphere(3, 40.0)  # closed: the whole needs support, so the share is shown
+    ob = make_object(bpy, V, F, scale_length=0.001)
+    log = draw_panel(bpy)
+    assert ("operator", "bolus.print_segment") in log and ("operator", "bolus.orient_parts") in log
+    assert ("operator", "bolus.export_parts") in log
+    assert bpy.ops.bolus.print_segment(parts=2) == {"FINISHED"}
+    assert bpy.ops.bolus.orient_parts() == {"FINISHED"}
+    labels = [t for kind, t in draw_panel(bpy) if kind == "label"]
+    t = json.loads(ob["bolus_orient_table"])
+    assert any(t_.endswith("area " + f"{json.loads(ob['bolus_print_table'])['area_balance']:.2f}") for t_ in labels)
+    assert "whole" in labels and f"{t['rows'][0]['WQ']:.0f}" in labels  # the whole model's row first
+    assert any(x.startswith("Parts' support:") for x in labels)
+    # a part object selected: the panel still finds its source's tables
+    bpy.context.view_layer.objects.active = bpy.data.objects[ob.name + "_part_0"]
+    assert "whole" in [t_ for kind, t_ in draw_panel(bpy) if kind == "label"]
