@@ -11,6 +11,16 @@ from .pattern_ops import PATTERN_SUFFIX, PROP_PATTERN_TABLE
 from .print_ops import PROP_ORIENT_TABLE, PROP_PART_SOURCE, PROP_PRINT_TABLE
 
 
+def draw_table(layout, heads, rows) -> None:
+    """A table of labels: a header row, then one row per tuple of strings."""
+    grid = layout.grid_flow(row_major=True, columns=len(heads), even_columns=True, align=True)
+    for text in heads:
+        grid.label(text=text)
+    for row in rows:
+        for text in row:
+            grid.label(text=text)
+
+
 class VIEW3D_PT_bolus(bpy.types.Panel):
     bl_label = "Bolus"
     bl_idname = "VIEW3D_PT_bolus"
@@ -50,12 +60,9 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
             except (ValueError, KeyError, TypeError):
                 table = []
             if table:
-                grid = box.grid_flow(row_major=True, columns=5, even_columns=True, align=True)
-                for head in ("Patch", "Verts", "Tris", "Σϖ", "FLV"):
-                    grid.label(text=head)
-                for r in table:
-                    for val in (str(r["patch"]), str(r["vertices"]), str(r["faces"]), f"{r['sum_varpi']:.2f}", f"{r['flv']:.3g}"):
-                        grid.label(text=val)
+                draw_table(box, ("Patch", "Verts", "Tris", "Σϖ", "FLV"), (
+                    (str(r["patch"]), str(r["vertices"]), str(r["faces"]), f"{r['sum_varpi']:.2f}", f"{r['flv']:.3g}")
+                    for r in table))
         box.operator("bolus.smooth_cuts", icon="IPO_EASE_IN_OUT")
         if obj is not None and PROP_CUT_TABLE in obj:
             try:
@@ -63,17 +70,9 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
             except (ValueError, TypeError):
                 cuts = []
             if cuts:
-                grid = box.grid_flow(row_major=True, columns=4, even_columns=True, align=True)
-                for head in ("Border", "Cut", "Turn/mm", "Moved"):
-                    grid.label(text=head)
-                for r in cuts:
-                    for val in (
-                        f"{r['a']}|{r['b']}",
-                        r["method"],
-                        f"{r['turning_before']:.2f}→{r['turning_after']:.2f}",
-                        f"{r['max_shift_mm']:.1f} mm",
-                    ):
-                        grid.label(text=val)
+                draw_table(box, ("Border", "Cut", "Turn/mm", "Moved"), (
+                    (f"{r['a']}|{r['b']}", r["method"], f"{r['turning_before']:.2f}→{r['turning_after']:.2f}",
+                     f"{r['max_shift_mm']:.1f} mm") for r in cuts))
 
         box = layout.box()
         box.label(text="3. Flat pattern", icon="UV")
@@ -93,12 +92,9 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
                 t = None
             if t:
                 box.label(text=f"{pat.name}: EL {t['EL'] * 100:.2f} %  EA {t['EA'] * 100:.2f} %")
-                grid = box.grid_flow(row_major=True, columns=4, even_columns=True, align=True)
-                for head in ("Patch", "EL %", "EA %", "Flips"):
-                    grid.label(text=head)
-                for r in t["islands"]:
-                    for val in (str(r["patch"]), f"{r['EL'] * 100:.2f}", f"{r['EA'] * 100:.2f}", str(r["flipped"])):
-                        grid.label(text=val)
+                draw_table(box, ("Patch", "EL %", "EA %", "Flips"), (
+                    (str(r["patch"]), f"{r['EL'] * 100:.2f}", f"{r['EA'] * 100:.2f}", str(r["flipped"]))
+                    for r in t["islands"]))
         box.prop(s, "seam_allowance_mm", text="Seam allowance (mm)")
         op = box.operator("bolus.export_pattern", icon="EXPORT")
         op.seam_allowance_mm = s.seam_allowance_mm
@@ -130,12 +126,9 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
             except (ValueError, TypeError):
                 t = None
             if t:
-                grid = box.grid_flow(row_major=True, columns=5, even_columns=True, align=True)
-                for head in ("Part", "Tris", "WQ mm³", "WU mm³", "Support"):
-                    grid.label(text=head)
-                for r in t["rows"]:
-                    for val in (r["part"], str(r["faces"]), f"{r['WQ']:.0f}", f"{r['WU']:.0f}", f"{r['support_volume_mm3']:.0f}"):
-                        grid.label(text=val)
+                draw_table(box, ("Part", "Tris", "WQ mm³", "WU mm³", "Support"), (
+                    (r["part"], str(r["faces"]), f"{r['WQ']:.0f}", f"{r['WU']:.0f}", f"{r['support_volume_mm3']:.0f}")
+                    for r in t["rows"]))
                 if t.get("support_ratio") is not None:
                     box.label(text=f"Parts' support: {t['support_ratio'] * 100:.0f} % of the whole model's")
         box.operator("bolus.export_parts", icon="EXPORT")

@@ -149,3 +149,30 @@ def seams(me) -> np.ndarray:
     s = np.empty(len(me.edges), dtype=bool)
     me.edges.foreach_get("use_seam", s)
     return s
+
+
+def loop_triangles(me) -> tuple[np.ndarray, np.ndarray]:
+    """Blender's triangulation: (vertex triples (t,3), polygon of each triangle (t,))."""
+    me.calc_loop_triangles()
+    nt = len(me.loop_triangles)
+    tv = np.empty(nt * 3, dtype=np.int64)
+    tp = np.empty(nt, dtype=np.int64)
+    me.loop_triangles.foreach_get("vertices", tv)
+    me.loop_triangles.foreach_get("polygon_index", tp)
+    return tv.reshape(-1, 3), tp
+
+
+def assert_labels_connected(me, labels, what: str = "patch") -> None:
+    """Each label's polygons are one piece through shared edges (scipy connected_components)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    le, lp = loop_edges_polys(me)
+    order = np.argsort(le, kind="stable")
+    le, lp = le[order], lp[order]
+    same = (le[1:] == le[:-1]) & (labels[lp[1:]] == labels[lp[:-1]])
+    a, b = lp[:-1][same], lp[1:][same]
+    n = len(me.polygons)
+    _, comp = connected_components(sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n)), directed=False)
+    for p in np.unique(labels):
+        assert len(np.unique(comp[labels == p])) == 1, f"{what} {p} is not edge-connected"

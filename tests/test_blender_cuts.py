@@ -18,19 +18,19 @@ import json
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
 from conftest import (
     ASSETS,
+    assert_labels_connected,
     attr_array,
     edge_verts,
     enter_edit_mode_with_faces,
     import_obj,
     loop_edges_polys,
+    loop_triangles,
     make_object,
     mesh_snapshot,
     seams,
 )
-from scipy.sparse.csgraph import connected_components
 
 pytestmark = pytest.mark.blender
 
@@ -81,17 +81,11 @@ def polygons(me) -> list[tuple[int, ...]]:
     return [tuple(p.vertices) for p in me.polygons]
 
 
-def loop_triangles(me) -> np.ndarray:
-    """Blender's own triangulation of the polygons: the surface the add-on cuts."""
-    me.calc_loop_triangles()
-    tv = np.empty(len(me.loop_triangles) * 3, dtype=np.int64)
-    me.loop_triangles.foreach_get("vertices", tv)
-    return tv.reshape(-1, 3)
 
 
 def surface_area(me) -> float:
     """Sum of the areas of Blender's triangles (for planar polygons: of the polygons)."""
-    P = coords(me)[loop_triangles(me)]
+    P = coords(me)[loop_triangles(me)[0]]
     return 0.5 * float(np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1).sum())
 
 
@@ -109,7 +103,7 @@ def surface_tree(me):
     """BVH of the mesh's surface as it is now (Blender's triangles, object space)."""
     from mathutils.bvhtree import BVHTree  # noqa: PLC0415 (only under Blender)
 
-    return BVHTree.FromPolygons([tuple(v) for v in coords(me)], [tuple(map(int, t)) for t in loop_triangles(me)])
+    return BVHTree.FromPolygons([tuple(v) for v in coords(me)], [tuple(map(int, t)) for t in loop_triangles(me)[0]])
 
 
 def distance_to(tree, P) -> np.ndarray:
@@ -150,18 +144,6 @@ def border_vertices(me, labels, a=None, b=None) -> np.ndarray:
     return np.array(sorted(out), dtype=np.int64)
 
 
-def assert_patches_connected(me, labels) -> None:
-    """Each patch is one piece through shared edges (scipy connected_components)."""
-    le, lp = loop_edges_polys(me)
-    order = np.argsort(le, kind="stable")
-    le, lp = le[order], lp[order]
-    same = (le[1:] == le[:-1]) & (labels[lp[1:]] == labels[lp[:-1]])
-    a, b = lp[:-1][same], lp[1:][same]
-    n = len(me.polygons)
-    G = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
-    _, comp = connected_components(G, directed=False)
-    for p in np.unique(labels):
-        assert len(np.unique(comp[labels == p])) == 1, f"patch {p} is not edge-connected"
 
 
 def fit_line(P2) -> tuple[np.ndarray, np.ndarray]:
@@ -277,7 +259,7 @@ def test_straight_border_on_quad_grid(bpy_addon, scene):
     assert polygon_area_sum(me) == pytest.approx(area0, rel=1e-6)
     # (c) two patches, each in one piece
     assert set(np.unique(lab).tolist()) == {0, 1}
-    assert_patches_connected(me, lab)
+    assert_labels_connected(me, lab)
     # (d) the border is a straight line
     c, nrm = check_straight_border(me, n0, lab)
     # every polygon is on the side of the line its label says
@@ -328,7 +310,7 @@ def test_curved_border_follows_a_parabola(bpy_addon, scene):
     assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
     V, lab = coords(me), labels_of(me)
     assert distance_to(tree0, V[n0:]).max() < 1e-6 * mesh_size(me)
-    assert_patches_connected(me, lab)
+    assert_labels_connected(me, lab)
     bv = border_vertices(me, lab)
     new = bv[bv >= n0]
     assert len(new) >= 10
@@ -352,7 +334,7 @@ def test_closed_border_follows_an_ellipse(bpy_addon, scene):
     assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
     V, lab = coords(me), labels_of(me)
     assert distance_to(tree0, V[n0:]).max() < 1e-6 * mesh_size(me)
-    assert_patches_connected(me, lab)
+    assert_labels_connected(me, lab)
     bv = border_vertices(me, lab)
     new = bv[bv >= n0]
     assert len(new) >= 20
@@ -381,7 +363,7 @@ def test_real_mesh_after_segment(bpy_addon, scene, capfd):
     lab0 = labels_of(me)
     n_patches = int(lab0.max()) + 1
     n0, V0 = len(me.vertices), coords(me)
-    ntri0 = len(loop_triangles(me))
+    ntri0 = len(loop_triangles(me)[0])
     tree0, area0 = surface_tree(me), surface_area(me)
     capfd.readouterr()
     assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
@@ -392,7 +374,7 @@ def test_real_mesh_after_segment(bpy_addon, scene, capfd):
     assert distance_to(tree0, V[n0:]).max() < 1e-6 * mesh_size(me)
     assert surface_area(me) == pytest.approx(area0, rel=1e-6)
     assert set(np.unique(lab).tolist()) == set(range(n_patches))
-    assert_patches_connected(me, lab)
+    assert_labels_connected(me, lab)
     np.testing.assert_array_equal(seams(me), between_patches(me, lab))
     rows = cut_table(ob)
     assert len(rows) >= n_patches - 1
@@ -407,7 +389,7 @@ def test_real_mesh_after_segment(bpy_addon, scene, capfd):
     before, after = table["before_smooth_cuts"], table["patches"]
     assert [r["patch"] for r in before] == [r["patch"] for r in after] == list(range(n_patches))
     assert sum(r["faces"] for r in before) == ntri0
-    assert sum(r["faces"] for r in after) == len(loop_triangles(me))
+    assert sum(r["faces"] for r in after) == len(loop_triangles(me)[0])
 
 
 def test_unfold_works_on_the_cut_mesh(bpy_addon, scene):
@@ -540,7 +522,7 @@ def test_edit_mode_works_on_the_whole_mesh(bpy_addon, scene):
     assert (len(me.vertices), len(me.polygons)) == (n_edit, nf_edit)  # leaving Edit Mode keeps the cut
     V, lab = coords(me), labels_of(me)
     assert distance_to(tree0, V[n0:]).max() < 1e-6 * mesh_size(me)
-    assert_patches_connected(me, lab)
+    assert_labels_connected(me, lab)
     check_straight_border(me, n0, lab)
     np.testing.assert_array_equal(seams(me), between_patches(me, lab))
 

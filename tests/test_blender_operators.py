@@ -16,6 +16,7 @@ import pytest
 from conftest import (
     ASSETS,
     attr_array,
+    loop_triangles,
     edge_verts,
     loop_edges_polys,
     seams,
@@ -59,15 +60,6 @@ def world_mm(bpy, ob) -> np.ndarray:
     return (coords(ob.data) @ M[:3, :3].T + M[:3, 3]) * bpy.context.scene.unit_settings.scale_length * 1000.0
 
 
-def loop_triangles(me) -> tuple[np.ndarray, np.ndarray]:
-    """Blender's triangulation: (vertex triples (t,3), polygon of each triangle (t,))."""
-    me.calc_loop_triangles()
-    nt = len(me.loop_triangles)
-    tv = np.empty(nt * 3, dtype=np.int64)
-    tp = np.empty(nt, dtype=np.int64)
-    me.loop_triangles.foreach_get("vertices", tv)
-    me.loop_triangles.foreach_get("polygon_index", tp)
-    return tv.reshape(-1, 3), tp
 
 
 def raw_varpi(V: np.ndarray, T: np.ndarray, n: int) -> np.ndarray:

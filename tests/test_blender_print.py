@@ -22,10 +22,16 @@ import re
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
-from conftest import ASSETS, import_obj, make_object, mesh_snapshot
+from conftest import (
+    ASSETS,
+    assert_labels_connected,
+    import_obj,
+    loop_edges_polys,
+    loop_triangles,
+    make_object,
+    mesh_snapshot,
+)
 from meshgen import box, grid, spherical_cap
-from scipy.sparse.csgraph import connected_components
 
 pytestmark = pytest.mark.blender
 
@@ -57,15 +63,6 @@ def mm_per_unit(bpy) -> float:
     return bpy.context.scene.unit_settings.scale_length * 1000.0
 
 
-def loop_triangles(me) -> tuple[np.ndarray, np.ndarray]:
-    """Blender's triangulation: (vertex triples (t,3), polygon of each triangle (t,))."""
-    me.calc_loop_triangles()
-    nt = len(me.loop_triangles)
-    tv = np.empty(nt * 3, dtype=np.int64)
-    tp = np.empty(nt, dtype=np.int64)
-    me.loop_triangles.foreach_get("vertices", tv)
-    me.loop_triangles.foreach_get("polygon_index", tp)
-    return tv.reshape(-1, 3), tp
 
 
 def tri_geometry(P):
@@ -158,16 +155,6 @@ def polygon_labels(me) -> np.ndarray:
     return out
 
 
-def loop_edges_polys(me) -> tuple[np.ndarray, np.ndarray]:
-    """(edge index, polygon index) of every corner."""
-    le = np.empty(len(me.loops), dtype=np.int64)
-    me.loops.foreach_get("edge_index", le)
-    starts = np.empty(len(me.polygons), dtype=np.int64)
-    totals = np.empty(len(me.polygons), dtype=np.int64)
-    me.polygons.foreach_get("loop_start", starts)
-    me.polygons.foreach_get("loop_total", totals)
-    assert np.array_equal(starts, np.cumsum(totals) - totals), "loops not stored polygon by polygon"
-    return le, np.repeat(np.arange(len(me.polygons)), totals)
 
 
 def edge_verts(me) -> np.ndarray:
@@ -176,17 +163,6 @@ def edge_verts(me) -> np.ndarray:
     return ev.reshape(-1, 2)
 
 
-def assert_parts_connected(me, labels) -> None:
-    """Each part is one piece through shared edges (scipy connected_components)."""
-    le, lp = loop_edges_polys(me)
-    order = np.argsort(le, kind="stable")
-    le, lp = le[order], lp[order]
-    same = (le[1:] == le[:-1]) & (labels[lp[1:]] == labels[lp[:-1]])
-    a, b = lp[:-1][same], lp[1:][same]
-    n = len(me.polygons)
-    _, comp = connected_components(sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n)), directed=False)
-    for p in np.unique(labels):
-        assert len(np.unique(comp[labels == p])) == 1, f"print part {p} is not edge-connected"
 
 
 def part_areas(me, labels) -> np.ndarray:
@@ -321,7 +297,7 @@ def test_print_segment_ict_parts(bpy_addon, scene, capfd):
         p = int(labels.max()) + 1
         assert labels.min() == 0 and np.array_equal(np.unique(labels), np.arange(p))
         assert p == 3 or ("Warning" in out and f"{p} parts instead of the 3 asked" in out), out
-        assert_parts_connected(me, labels)
+        assert_labels_connected(me, labels, "print part")
         areas = part_areas(me, labels)
         assert (areas > 0).all()
         ratios[method] = areas.max() / areas.min()
