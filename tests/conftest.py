@@ -22,6 +22,9 @@ sys.path.insert(0, str(ROOT))
 
 
 def shared_mesh(name: str) -> Path:
+    """A mesh from assets/ (copied with its licence), else from ../shared/meshes."""
+    if (ASSETS / name).exists():
+        return ASSETS / name
     p = SHARED_MESHES / name
     if not p.exists():
         pytest.skip(f"{p} not available (../shared/meshes is expected beside the repository)")
