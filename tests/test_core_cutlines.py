@@ -353,3 +353,12 @@ def test_refuses_patches_without_a_common_border():
     labels[c[:, 0] > 70] = 1
     with pytest.raises(BolusError, match="do not share any border"):
         smooth_cuts(V, F, labels)
+
+
+def test_second_run_says_the_borders_are_already_smooth():
+    V, F, h = sheet()
+    c = centroids(V, F)
+    labels = (c[:, 0] > 50 + 0.3 * (c[:, 1] - 50)).astype(int)
+    res = smooth_cuts(V, F, labels)
+    with pytest.raises(BolusError, match="already smooth cut lines"):
+        smooth_cuts(res.V, res.F, res.labels)

@@ -103,6 +103,7 @@ MAX_FOURIER = 3
 PARAM_CORRECTIONS = 4  #: closed fits: parameter-correction rounds (nodes re-parameterised by their nearest curve point)
 MBO_SIGMA_EDGES = (2.0, 3.5, 6.0)  #: diffusion lengths tried, in mean border edges
 MBO_ITERATIONS = 2
+NOT_SMOOTHER = "the cut would not be smoother than the border"
 SMOOTH_ENOUGH = 0.3  #: a smoothed path is accepted at once when it turns <= 30 % of the border
 
 
@@ -838,7 +839,7 @@ def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: 
                 reasons.append(f"{name}: the cut would move {shift:.1f} mm from the border")
                 continue
             if turn1 >= turn0:
-                reasons.append(f"{name}: the cut would not be smoother than the border")
+                reasons.append(f"{name}: {NOT_SMOOTHER}")
                 continue
             result = (new_st, name, len1, turn1, shift, rms)
             if turn1 > SMOOTH_ENOUGH * turn0:
@@ -851,7 +852,9 @@ def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: 
             return _accept(report, result, reasons)
     if fallback is not None:
         return _accept(report, fallback, reasons)
-    report.note = "left as it is: " + "; ".join(reasons)
+    report.note = "left as it is: " + "; ".join(dict.fromkeys(reasons))
+    if reasons and all(r.endswith(NOT_SMOOTHER) or r.endswith("would vanish") for r in reasons):
+        report.note = "left as it is: already as smooth as any cut we can fit"
     return st, report
 
 
@@ -922,6 +925,8 @@ def smooth_cuts(V, F, labels, snap: float = SNAP, progress=None) -> SmoothCutRes
             reports.append(rep)
             done += 1
     if not any(r.method != "unchanged" for r in reports):
+        if all(r.note.endswith("already as smooth as any cut we can fit") for r in reports):
+            raise BolusError("the patch borders are already smooth cut lines: nothing to change")
         why = "; ".join(f"patches {r.a}|{r.b}: {r.note}" for r in reports)
         raise BolusError(f"no border could be smoothed ({why})")
     split = np.ones(m, dtype=bool)
