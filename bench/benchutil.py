@@ -81,6 +81,21 @@ def clean_scene(bpy) -> None:
     gc.collect()
 
 
+def import_mesh(bpy, path, scale_length: float):
+    """Import one OBJ as the active object in a scene where 1 unit = scale_length m."""
+    with captured_output() as out:
+        bpy.ops.wm.obj_import(filepath=str(path))
+    objs = [o for o in bpy.context.selected_objects if o.type == "MESH"]
+    if len(objs) != 1:
+        raise RuntimeError(f"{Path(path).name}: expected one mesh object, the importer made {len(objs)}\n{out()}")
+    ob = objs[0]
+    bpy.context.view_layer.objects.active = ob
+    ob.select_set(True)
+    bpy.context.scene.unit_settings.system = "METRIC"
+    bpy.context.scene.unit_settings.scale_length = scale_length
+    return ob
+
+
 def write_json(path, payload: dict) -> None:
     """Write the figures with the versions and the machine they were measured on."""
     import bpy

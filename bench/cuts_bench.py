@@ -36,7 +36,7 @@ for p in (ROOT, ROOT / "bench"):
     if str(p) not in sys.path:
         sys.path.insert(0, str(p))
 
-from benchutil import captured_output, clean_scene, write_json  # noqa: E402
+from benchutil import captured_output, clean_scene, import_mesh, write_json  # noqa: E402
 
 SHARED_MESHES = Path(os.environ.get("BOLUS_SHARED_MESHES", ROOT.parent / "shared" / "meshes"))
 PATCHES, ETA, SEED = 4, 5.0, 0
@@ -55,16 +55,6 @@ MESHES = [
 QUICK = {"makehuman_face_patch.obj", "ict_face_narrow.obj"}
 
 
-def import_mesh(bpy, path: Path, scale_length: float):
-    with captured_output() as out:
-        bpy.ops.wm.obj_import(filepath=str(path))
-    objs = [o for o in bpy.context.selected_objects if o.type == "MESH"]
-    if len(objs) != 1:
-        raise RuntimeError(f"{path.name}: expected one mesh object, got {len(objs)}\n{out()}")
-    ob = objs[0]
-    bpy.context.view_layer.objects.active = ob
-    bpy.context.scene.unit_settings.scale_length = scale_length
-    return ob
 
 
 def call(bpy, op, ob, verbose=False, **kw):

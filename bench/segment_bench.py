@@ -63,21 +63,9 @@ MB = 1024.0 * 1024.0
 # ----------------------------------------------------------------------------- helpers
 
 
-from benchutil import captured_output, clean_scene, current_rss_kb, maxrss_kb, reset_peak_rss, write_json  # noqa: E402
+from benchutil import captured_output, clean_scene, current_rss_kb, import_mesh, maxrss_kb, reset_peak_rss, write_json  # noqa: E402
 
 
-def import_mesh(bpy, path: Path, scale_length: float):
-    with captured_output() as out:
-        bpy.ops.wm.obj_import(filepath=str(path))
-    objs = [o for o in bpy.context.selected_objects if o.type == "MESH"]
-    if len(objs) != 1:
-        raise RuntimeError(f"{path.name}: expected one mesh object, the importer made {len(objs)}\n{out()}")
-    ob = objs[0]
-    bpy.context.view_layer.objects.active = ob
-    ob.select_set(True)
-    bpy.context.scene.unit_settings.system = "METRIC"
-    bpy.context.scene.unit_settings.scale_length = scale_length
-    return ob
 
 
 def run_segment(bpy, ob, eta: float, verbose: bool) -> dict:
