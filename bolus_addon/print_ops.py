@@ -189,7 +189,7 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
             if len(Fl) < 4:
                 warnings.append(f"print part {p} has only {len(Fl)} triangles: its orientation is of little use")
             o = orient(region.V[ids], Fl, topo=sub, **kw)
-            results.append((int(p), sel, o))
+            results.append((int(p), o))
             rows.append(_row(f"part {p}", int(sel.sum()), float(sub.areas.sum()), o))
         self.progress(0.9, "part objects")
         self._make_part_objects(context, region, poly_labels, results)
@@ -226,7 +226,7 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
         x_cursor = 0.0
         region_polys = np.zeros(len(me.polygons), dtype=bool)
         region_polys[region.poly_ids] = True
-        for p, _sel, o in results:
+        for p, o in results:
             polys = np.nonzero((poly_labels == p) & region_polys)[0]
             loops = [loop_v[starts[i]:starts[i] + totals[i]] for i in polys]
             used, inv = np.unique(np.concatenate(loops), return_inverse=True)

@@ -300,10 +300,10 @@ def test_straight_border_on_quad_grid(bpy_addon, scene):
     assert 0 < row["max_shift_mm"] < 2 * H
 
 
-# ----------------------------------------------------------------- curved border
-def test_curved_border_follows_a_parabola(bpy_addon, scene):
-    bpy = bpy_addon
-    ob = labelled_grid(bpy, parabola_rule)
+def cut_labelled_grid(bpy, rule):
+    """Cut a labelled grid; check the new vertices lie on the old surface and the patches stay
+    connected.  Returns (object, vertices, border vertices, the new ones among them)."""
+    ob = labelled_grid(bpy, rule)
     me = ob.data
     n0 = len(me.vertices)
     tree0 = surface_tree(me)
@@ -312,7 +312,12 @@ def test_curved_border_follows_a_parabola(bpy_addon, scene):
     assert distance_to(tree0, V[n0:]).max() < 1e-6 * mesh_size(me)
     assert_labels_connected(me, lab)
     bv = border_vertices(me, lab)
-    new = bv[bv >= n0]
+    return ob, V, bv, bv[bv >= n0]
+
+
+# ----------------------------------------------------------------- curved border
+def test_curved_border_follows_a_parabola(bpy_addon, scene):
+    ob, V, bv, new = cut_labelled_grid(bpy_addon, parabola_rule)
     assert len(new) >= 10
     x, y = V[new, 0], V[new, 1]
     coef = np.polyfit(y, x, 2)
@@ -326,17 +331,7 @@ def test_curved_border_follows_a_parabola(bpy_addon, scene):
 
 
 def test_closed_border_follows_an_ellipse(bpy_addon, scene):
-    bpy = bpy_addon
-    ob = labelled_grid(bpy, disk_rule)
-    me = ob.data
-    n0 = len(me.vertices)
-    tree0 = surface_tree(me)
-    assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
-    V, lab = coords(me), labels_of(me)
-    assert distance_to(tree0, V[n0:]).max() < 1e-6 * mesh_size(me)
-    assert_labels_connected(me, lab)
-    bv = border_vertices(me, lab)
-    new = bv[bv >= n0]
+    ob, V, bv, new = cut_labelled_grid(bpy_addon, disk_rule)
     assert len(new) >= 20
     (A, B, C, *_), dist = fit_conic(V[new, :2])
     assert B * B - 4 * A * C < 0  # an ellipse
@@ -349,6 +344,7 @@ def test_closed_border_follows_an_ellipse(bpy_addon, scene):
     assert row["closed"] is True and row["method"] == "ellipse"
     assert row["turning_after"] < 0.3 * row["turning_before"]
     # the disk is still the inner patch: a polygon at the centre is patch 1, the corners 0
+    me, lab = ob.data, labels_of(ob.data)
     cent = np.array([V[list(p)].mean(axis=0)[:2] for p in polygons(me)])
     assert np.all(lab[np.hypot(*(cent - 50.0).T) < 20.0] == 1)
     assert np.all(lab[np.hypot(*(cent - 50.0).T) > 30.0] == 0)

@@ -912,10 +912,11 @@ def smooth_cuts(V, F, labels, snap: float = SNAP, progress=None) -> SmoothCutRes
     total = len(borders)
     for a, b in pairs:
         # borders of this pair on the current mesh (earlier cuts may have moved junctions)
-        cur = border_components(MeshTopology(st.V, st.F), st.labels)
-        for bd in [x for x in cur if (x.a, x.b) == (a, b)]:
+        fresh = border_components(MeshTopology(st.V, st.F), st.labels)
+        for bd in [x for x in fresh if (x.a, x.b) == (a, b)]:
             report(done / max(total, 1), f"cut between patches {a} and {b}")
-            fresh = border_components(MeshTopology(st.V, st.F), st.labels)
+            if reports and reports[-1].method != "unchanged" and (reports[-1].a, reports[-1].b) == (a, b):
+                fresh = border_components(MeshTopology(st.V, st.F), st.labels)  # the last cut moved things
             # the same border on the current mesh (its edges are unchanged: other pairs' cuts
             # never touch an a|b edge)
             match = [x for x in fresh if (x.a, x.b) == (a, b) and len(np.intersect1d(_edge_keys(x.edges), _edge_keys(bd.edges)))]
