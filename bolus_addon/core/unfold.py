@@ -1042,16 +1042,30 @@ class Pattern:
     patches: list
 
 
-def iter_unfold_patches(V, F, labels, method: str = "lbfgs", refine_rounds: int = 3):
-    """Yield (index, count, Unfolding) for every patch label 0..p-1 of the triangles (m,)."""
+def iter_unfold_patches(V, F, labels, method: str = "lbfgs", refine_rounds: int = 3, progress=None):
+    """Yield (index, count, Unfolding) for every patch label 0..p-1 of the triangles (m,).
+
+    progress(fraction, text): the overall fraction in [0, 1], each patch weighted by its
+    triangle count, text "patch k/n: <step>" (called from inside `unfold_patch`).
+    """
     labels = np.asarray(labels, dtype=np.int64)
+    F = np.asarray(F, dtype=np.int64)
     ids = np.unique(labels[labels >= 0])
+    sizes = np.array([np.count_nonzero(labels == p) for p in ids], dtype=np.float64)
+    before = np.concatenate([[0.0], np.cumsum(sizes)]) / max(sizes.sum(), 1.0)
     for k, p in enumerate(ids):
         sel = labels == p
         Fs = F[sel]
         verts, inv = np.unique(Fs.ravel(), return_inverse=True)
+        sub = None
+        if progress is not None:
+            lo, hi, head = before[k], before[k + 1], f"patch {k + 1}/{len(ids)}"
+
+            def sub(f, text, lo=lo, hi=hi, head=head):
+                progress(float(lo + (hi - lo) * min(max(f, 0.0), 1.0)), f"{head}: {text}")
         try:
-            u = unfold_patch(V[verts], inv.reshape(-1, 3), method=method, refine_rounds=refine_rounds)
+            u = unfold_patch(V[verts], inv.reshape(-1, 3), method=method, refine_rounds=refine_rounds,
+                             progress=sub)
         except BolusError as exc:
             raise BolusError(f"patch {p}: {exc}") from exc
         u.vert_origin = verts[u.vert_origin]  # back to the caller's vertex indices
