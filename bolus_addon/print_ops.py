@@ -289,6 +289,7 @@ class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
             raise BolusError(f"the folder '{folder}' is not writable")
         scale = mesh_io.mm_per_unit(context.scene)
         was_active, was_selected = context.view_layer.objects.active, list(context.selected_objects)
+        was_mode = obj.mode  # the user's mode comes back afterwards
         if obj.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
         written = []
@@ -305,6 +306,8 @@ class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
             for o in context.view_layer.objects:
                 o.select_set(o in was_selected)
             context.view_layer.objects.active = was_active
+            if was_mode != "OBJECT" and was_active is obj:
+                bpy.ops.object.mode_set(mode=was_mode)
         self.report({"INFO"}, f"Wrote {len(written)} STL files (binary, mm) to {folder}: "
                     + ", ".join(os.path.basename(p) for p in written))
         return {"FINISHED"}
