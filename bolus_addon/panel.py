@@ -11,14 +11,40 @@ from .pattern_ops import PATTERN_SUFFIX, PROP_PATTERN_TABLE
 from .print_ops import PROP_ORIENT_TABLE, PROP_PART_SOURCE, PROP_PRINT_TABLE
 
 
-def draw_table(layout, heads, rows) -> None:
-    """A table of labels: a header row, then one row per tuple of strings."""
+def draw_table(layout, heads, rows, alert=()) -> None:
+    """A table of labels: a header row, then one row per tuple of strings; rows whose
+    index is in `alert` are drawn in red."""
     grid = layout.grid_flow(row_major=True, columns=len(heads), even_columns=True, align=True)
     for text in heads:
         grid.label(text=text)
-    for row in rows:
+    alert = set(alert)
+    for i, row in enumerate(rows):
         for text in row:
-            grid.label(text=text)
+            if i in alert:
+                cell = grid.row()
+                cell.alert = True
+                cell.label(text=text)
+            else:
+                grid.label(text=text)
+
+
+def draw_pattern_table(layout, t: dict) -> None:
+    """The pattern's pieces; the ones not fit to cut (unfold's warnings) in red, with a red
+    summary line and a few words of advice each."""
+    rows = t.get("islands", [])
+    bad = [i for i, r in enumerate(rows) if r.get("warn")]
+    draw_table(layout, ("Patch", "EL %", "EA %", "Area", "Flips"), [
+        (r.get("name", f"patch {r['patch']}").removeprefix("patch "), f"{r['EL'] * 100:.1f}",
+         f"{r['EA'] * 100:.1f}", f"{r['area_ratio']:.2f}" if "area_ratio" in r else "-", str(r["flipped"]))
+        for r in rows], alert=bad)
+    if bad:
+        col = layout.column(align=True)
+        col.alert = True
+        col.label(text=f"{len(bad)} of {len(rows)} pieces not fit to cut (EL/EA > {t.get('warn_pct', 3.0):g} %)",
+                  icon="ERROR")
+        for i in bad:
+            r = rows[i]
+            col.label(text=f"{r.get('name', r['patch'])}: {r.get('short_advice') or 'see the warnings'}")
 
 
 class VIEW3D_PT_bolus(bpy.types.Panel):
@@ -92,9 +118,8 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
                 t = None
             if t:
                 box.label(text=f"{pat.name}: EL {t['EL'] * 100:.2f} %  EA {t['EA'] * 100:.2f} %")
-                draw_table(box, ("Patch", "EL %", "EA %", "Flips"), (
-                    (str(r["patch"]), f"{r['EL'] * 100:.2f}", f"{r['EA'] * 100:.2f}", str(r["flipped"]))
-                    for r in t["islands"]))
+                draw_pattern_table(box, t)
+        box.prop(s, "warn_distortion_pct")
         box.prop(s, "seam_allowance_mm", text="Seam allowance (mm)")
         op = box.operator("bolus.export_pattern", icon="EXPORT")
         op.seam_allowance_mm = s.seam_allowance_mm

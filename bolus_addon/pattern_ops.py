@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import traceback
 
 import bpy
@@ -21,7 +22,9 @@ from . import mesh_io
 from .core.colormap import diverging_linear_rgba
 from .core.errors import BolusError
 from .core.pattern_svg import pattern_svg
-from .core.topology import MeshTopology
+from .core.piece_advice import DEFAULT_WARN_FRACTION, piece_advice
+from .core.saliency import DEFAULT_SMOOTHING_MM
+from .core.topology import MeshTopology, face_areas
 from .core.unfold import assemble_pattern, iter_unfold_patches, polygon_area_error, polygon_errors
 from .operators import ATTR_PATCH, BolusOperator
 from .properties import gap_property, refine_property, seam_allowance_property, unfold_method_property
@@ -49,7 +52,9 @@ class _UnfoldJob:
         if outside.all():
             raise BolusError("none of the region's faces belongs to a patch: run Segment on this region first")
         if outside.any():
-            self.warnings.append(f"{len(np.unique(region.tri_poly[outside]))} faces in no patch were left out")
+            # expected when a region was segmented: said once, as INFO (finish)
+            self.infos = [f"{len(np.unique(region.tri_poly[outside]))} faces outside the segmented patches "
+                          "(bolus_patch = -1) were left out of the pattern"]
         topo = MeshTopology(region.V, region.F)
         bad = int(topo.degenerate_faces().sum())
         if bad:
@@ -76,6 +81,71 @@ class _UnfoldJob:
             return False
         self.done.append(u)
         return True
+
+
+def is_pattern_object(obj) -> bool:
+    """True for a ``<name>_pattern`` object made by Unfold."""
+    return (obj is not None and obj.type == "MESH"
+            and (PROP_PATTERN_TABLE in obj or ATTR_SOURCE_FACE in obj.data.attributes))
+
+
+def _signed_area_2d(P: np.ndarray, F: np.ndarray) -> np.ndarray:
+    a, b, c = P[F[:, 0]], P[F[:, 1]], P[F[:, 2]]
+    return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+
+
+def diagnose_pieces(context, job: _UnfoldJob, rows: list[dict]) -> float:
+    """Add to every row its pattern/skin area ratio, its angle excess/deficit and, when
+    EL, EA (above ``Scene.bolus.warn_distortion_pct``), flips or overlaps make it a piece
+    not to cut as it is, ``warn`` and the advice of `core.piece_advice`.  Returns the limit in %."""
+    settings = getattr(context.scene, "bolus", None)
+    warn_pct = float(getattr(settings, "warn_distortion_pct", DEFAULT_WARN_FRACTION * 100.0))
+    sigma = float(getattr(settings, "smoothing_mm", DEFAULT_SMOOTHING_MM))
+    region = job.region
+    pieces_of = np.bincount(job.island_patch[job.island_patch >= 0])
+    seen: dict[int, int] = {}
+    for k, (u, row) in enumerate(zip(job.done, rows)):
+        p = row["patch"]
+        seen[p] = seen.get(p, 0) + 1
+        row["name"] = f"patch {p}" + (f" piece {seen[p]}/{pieces_of[p]}" if pieces_of[p] > 1 else "")
+        skin = float(face_areas(region.V[u.vert_origin], u.F).sum())
+        row["area_ratio"] = float(_signed_area_2d(u.UV, u.F).sum()) / skin if skin > 0 else 0.0
+        Fk = region.F[job.islands == k]
+        used, inv = np.unique(Fk.ravel(), return_inverse=True)
+        try:
+            adv = piece_advice(region.V[used], inv.reshape(-1, 3), row["EL"], row["EA"], row["flipped"],
+                               row["overlaps"], threshold=warn_pct / 100.0, sigma_mm=sigma)
+        except BolusError as exc:  # the figures are still worth a warning
+            row.update(kind="", excess_rad=None, deficit_rad=None, advice=f"(no diagnosis: {exc})",
+                       short_advice="", warn=bool(row["EL"] * 100 > warn_pct or row["EA"] * 100 > warn_pct
+                                                  or row["flipped"] or row["overlaps"]))
+            continue
+        row.update(kind=adv.kind, excess_rad=adv.excess_rad, deficit_rad=adv.deficit_rad, advice=adv.advice,
+                   short_advice=adv.short_advice, warn=adv.distorted)
+    return warn_pct
+
+
+def piece_warning(row: dict, warn_pct: float) -> str:
+    """The WARNING for a piece not to cut as it is: its figures and the advice."""
+    return (f"{row['name'].capitalize()}: EL {row['EL'] * 100:.1f} %, EA {row['EA'] * 100:.1f} %, pattern area "
+            f"{row['area_ratio']:.2f} of the skin, {row['flipped']} flipped and {row['overlaps']} overlapping "
+            f"triangles: above the {warn_pct:g} % limit, do not cut it as it is; {row['advice']}")
+
+
+def core_notes(messages) -> tuple[list[str], list[str]]:
+    """The core's per-patch messages as (warnings, infos): what they say about the pattern
+    stays a warning, their advice to segment into more patches is dropped (the piece's own
+    advice replaces it: more patches make angle-excess pieces worse), and the note that the
+    unfolding started from a conformal map is information, not a problem."""
+    warnings, infos = [], []
+    for msg in messages:
+        if msg.startswith("started from a conformal map"):
+            infos.append(msg)
+            continue
+        msg = re.sub(r"[;:,]?\s*(segment|split) (it |the patch )?into more (patches|pieces)[^;]*", "", msg).strip()
+        if msg:
+            warnings.append(msg)
+    return warnings, infos
 
 
 def build_pattern_object(context, job: _UnfoldJob) -> bpy.types.Object:
@@ -155,11 +225,13 @@ def build_pattern_object(context, job: _UnfoldJob) -> bpy.types.Object:
         rows.append({"island": k, "patch": p, "faces": int(np.count_nonzero(job.islands == k)), "EL": el, "EA": ea,
                      "flipped": fl, "overlaps": u.overlaps, "cut": u.cut, "seconds": round(u.seconds, 3),
                      "iterations": u.iterations, "method": u.method})
+    warn_pct = diagnose_pieces(context, job, rows)
     total = errors[None]
     obj["bolus_EL"] = total[0]
     obj["bolus_EA"] = total[1]
     obj["bolus_source"] = src.name
-    obj[PROP_PATTERN_TABLE] = json.dumps({"EL": total[0], "EA": total[1], "flipped": total[2], "islands": rows})
+    obj[PROP_PATTERN_TABLE] = json.dumps({"EL": total[0], "EA": total[1], "flipped": total[2], "warn_pct": warn_pct,
+                                          "islands": rows})
     job.rows = rows
     job.total = total
     return obj
@@ -178,6 +250,18 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
     _timer = None
     _job = None
 
+    @classmethod
+    def poll(cls, context):
+        if not super().poll(context):
+            return False
+        obj = context.active_object
+        if is_pattern_object(obj):  # would make '<name>_pattern_pattern'
+            src = obj.get("bolus_source", obj.name.removesuffix(PATTERN_SUFFIX))
+            cls.poll_message_set(f"'{obj.name}' is a pattern made by Unfold: select its source '{src}' "
+                                 "and unfold that")
+            return False
+        return True
+
     def run(self, context):
         job = _UnfoldJob(context, self.method, self.refine, self.gap_mm)
         while job.step():
@@ -188,15 +272,28 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
         with mesh_io.object_mode(job.region.obj):
             obj = build_pattern_object(context, job)
         self.warn_all(job.warnings)
+        for msg in getattr(job, "infos", []):
+            self.report({"INFO"}, msg)
         for u, row in zip(job.done, job.rows):
-            self.warn_all(f"patch {row['patch']}: {w}" for w in u.warnings)
+            warnings, infos = core_notes(u.warnings)
+            self.warn_all(f"{row['name']}: {w}" for w in warnings)
+            for msg in infos:
+                self.report({"INFO"}, f"{row['name']}: {msg}")
             if row["cut"]:
-                self.report({"INFO"}, f"patch {row['patch']}: not a disk, {row['cut']}")
+                self.report({"INFO"}, f"{row['name']}: not a disk, {row['cut']}")
         self.report({"INFO"}, f"Unfolded {len(job.done)} islands into '{obj.name}': EL {job.total[0] * 100:.2f} %, "
                               f"EA {job.total[1] * 100:.2f} %, {job.total[2]} flipped faces")
         for row in job.rows:
-            self.report({"INFO"}, f"Patch {row['patch']}: {row['faces']} triangles, EL {row['EL'] * 100:.3f} %, "
-                                  f"EA {row['EA'] * 100:.3f} %, flipped {row['flipped']}, {row['seconds']:.2f} s")
+            self.report({"INFO"}, f"{row['name'].capitalize()}: {row['faces']} triangles, EL {row['EL'] * 100:.3f} %, "
+                                  f"EA {row['EA'] * 100:.3f} %, flipped {row['flipped']}, pattern area "
+                                  f"{row['area_ratio']:.3f} of the skin, {row['seconds']:.2f} s")
+        bad = [row for row in job.rows if row.get("warn")]
+        warn_pct = json.loads(obj[PROP_PATTERN_TABLE])["warn_pct"]
+        self.warn_all(piece_warning(row, warn_pct) for row in bad)
+        if bad:  # last, so the status bar shows it
+            self.report({"WARNING"}, f"{len(bad)} of {len(job.rows)} pattern pieces are not fit to cut "
+                                     f"(EL or EA above {warn_pct:g} %, or folded over): "
+                                     + ", ".join(row["name"] for row in bad) + "; see the advice above")
         return {"FINISHED"}
 
     # interactive: one island per timer tick, Esc cancels

@@ -84,6 +84,17 @@ def seam_allowance_property(**kw):
                          default=0.0, min=0.0, soft_max=20.0, **kw)
 
 
+def warn_distortion_property(**kw):
+    return FloatProperty(
+        name="Warn above",
+        description=(
+            "A pattern piece whose length or area error (EL or EA) is above this percentage, or that has "
+            "flipped or overlapping triangles, gets a warning with its figures and what to do about it"
+        ),
+        default=3.0, min=0.0, soft_max=20.0, precision=1, subtype="PERCENTAGE", **kw,
+    )
+
+
 PRINT_METHODS = [
     ("ABCUT", "ABcut", "Area-balanced spectral cut (seed 6.2): parts of similar area (default)"),
     ("RATIOCUT", "RatioCut", "Plain spectral cut, the seed's 'traditional method' (for comparison)"),
@@ -127,6 +138,7 @@ class BolusSettings(bpy.types.PropertyGroup):
     refine: refine_property()
     gap_mm: gap_property()
     seam_allowance_mm: seam_allowance_property()
+    warn_distortion_pct: warn_distortion_property()
     parts: parts_property()
     print_method: print_method_property()
     layer_mm: layer_property()

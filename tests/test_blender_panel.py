@@ -28,16 +28,30 @@ class _Op:
 
 
 class RecordingLayout:
-    def __init__(self, bpy, log):
-        self.bpy, self.log = bpy, log
+    """Records labels, props and operators; a label drawn where `alert` is on (set here or
+    on a parent layout, as in Blender) is recorded a second time as ("alert", text)."""
+
+    def __init__(self, bpy, log, parent=None):
+        self.bpy, self.log, self.parent = bpy, log, parent
+        self._alert = False
+
+    @property
+    def alert(self):
+        return self._alert or (self.parent is not None and self.parent.alert)
+
+    @alert.setter
+    def alert(self, value):
+        self._alert = bool(value)
 
     def _child(self, *a, **k):
-        return RecordingLayout(self.bpy, self.log)
+        return RecordingLayout(self.bpy, self.log, self)
 
     box = column = row = grid_flow = _child
 
     def label(self, text="", **k):
         self.log.append(("label", text))
+        if self.alert:
+            self.log.append(("alert", text))
 
     def prop(self, data, name, **k):
         assert name in data.bl_rna.properties, f"{data} has no property {name!r}"
@@ -110,3 +124,29 @@ def test_panel_shows_the_print_tables(bpy_addon, scene):
     # a part object selected: the panel still finds its source's tables
     bpy.context.view_layer.objects.active = bpy.data.objects[ob.name + "_part_0"]
     assert "whole" in [t_ for kind, t_ in draw_panel(bpy) if kind == "label"]
+
+
+def test_panel_shows_pieces_not_fit_to_cut_in_red(bpy_addon, scene):
+    """A 120 degree cap of 10 mm radius in one patch is warned: its row and a summary in red,
+    with a few words of advice; the threshold is a scene setting shown in the panel."""
+    bpy = bpy_addon
+    V, F = spherical_cap(10.0, 120.0, 3)
+    ob = make_object(bpy, V, F, scale_length=0.001)
+    assert ("prop", "warn_distortion_pct") in draw_panel(bpy)
+    assert bpy.ops.bolus.segment(patches=1) == {"FINISHED"}
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    row = json.loads(bpy.data.objects[ob.name + "_pattern"]["bolus_pattern_table"])["islands"][0]
+    log = draw_panel(bpy)
+    red = [t for kind, t in log if kind == "alert"]
+    assert f"{row['EL'] * 100:.1f}" in red and f"{row['EA'] * 100:.1f}" in red and f"{row['area_ratio']:.2f}" in red
+    assert any(t.startswith("1 of 1 pieces not fit to cut") for t in red)
+    assert "patch 0: dome: more patches or a dart" in red
+    # raised threshold: unfold again, nothing red
+    scene.bolus.warn_distortion_pct = 50.0
+    try:
+        assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    finally:
+        scene.bolus.property_unset("warn_distortion_pct")
+    log = draw_panel(bpy)
+    assert not [t for kind, t in log if kind == "alert"]
+    assert f"{row['EL'] * 100:.1f}" in [t for kind, t in log if kind == "label"]  # the row is still there

@@ -24,6 +24,7 @@ import pytest
 from conftest import ASSETS, attr_array, enter_edit_mode_with_faces, import_obj, make_object, mesh_snapshot
 from meshgen import cone_piece, cylinder_piece, spherical_cap
 
+from bolus_addon.core.geometry2d import cross2d
 from bolus_addon.core.pattern_svg import svg_outline_paths
 
 pytestmark = pytest.mark.blender
@@ -44,7 +45,7 @@ def quad_cells(na: int, nl: int) -> np.ndarray:
 def _convex(P: np.ndarray) -> bool:
     a = np.roll(P, -1, axis=0) - P
     b = np.roll(P, -2, axis=0) - np.roll(P, -1, axis=0)
-    return bool((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0] > 0).all())
+    return bool((cross2d(a, b) > 0).all())
 
 
 def flat_mixed_sheet(nx=8, ny=6, h=10.0, jitter=0.2, seed=1):
@@ -140,7 +141,7 @@ def spec_measure(bpy, src, pat) -> dict:
     L = np.linalg.norm(P - np.roll(P, -1, axis=1), axis=2)
     A0 = 0.5 * np.linalg.norm(np.cross(S[:, 1] - S[:, 0], S[:, 2] - S[:, 0]), axis=1)
     a, b = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
-    A = 0.5 * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+    A = 0.5 * cross2d(a, b)
 
     def errors(sel):
         return (float(np.abs(L[sel] - L0[sel]).sum() / L0[sel].sum()),
@@ -791,3 +792,156 @@ def test_export_pattern_without_pattern(bpy_addon, scene, tmp_path):
     with pytest.raises(RuntimeError, match="No active object"):
         bpy.ops.bolus.export_pattern(filepath=str(target))
     assert not target.exists()
+
+
+# =========================================================================== 10. pieces not to cut
+def warning_lines(out: str) -> list[str]:
+    return [ln for ln in out.splitlines() if ln.startswith("Warning:")]
+
+
+def cap_in_one_patch(bpy, half_angle_deg):
+    V, F = spherical_cap(10.0, half_angle_deg, 3)  # R = 10 mm, in a mm scene
+    src = make_object(bpy, V, F, name="cap", scale_length=0.001)
+    assert bpy.ops.bolus.segment(patches=1) == {"FINISHED"}
+    return src
+
+
+def test_badly_shrunk_cap_is_warned_with_its_figures_and_the_dome_advice(bpy_addon, scene, capfd):
+    """Issue 9 item 4: a 120 degree cap of 10 mm radius in one patch unfolds with EL > 10 %;
+    it used to get no warning (only "started from a conformal map")."""
+    bpy = bpy_addon
+    src = cap_in_one_patch(bpy, 120.0)
+    capfd.readouterr()
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    out = reports(capfd)
+    pat = pattern_of(bpy, src)
+    m = spec_measure(bpy, src, pat)
+    assert m["EL"] > 0.1, "test setup: the cap does not lie flat"
+    ratio = m["A"].sum() / m["A0"].sum()
+    piece = [ln for ln in warning_lines(out) if ln.startswith("Warning: Patch 0: EL")]
+    assert len(piece) == 1, out
+    w = piece[0]
+    assert (f"EL {m['EL'] * 100:.1f} %, EA {m['EA'] * 100:.1f} %, pattern area {ratio:.2f} of the skin, "
+            "0 flipped and 0 overlapping triangles: above the 3 % limit") in w, w
+    # the dome advice: more patches or a dart, never the cavity/print advice
+    assert "angle deficit" in w and "more, smaller patches" in w and "dart" in w
+    assert "printed bolus" not in w
+    summary = warning_lines(out)[-1]
+    assert summary.startswith("Warning: 1 of 1 pattern pieces are not fit to cut") and "patch 0" in summary
+    assert not any("conformal" in ln for ln in warning_lines(out)), "a note, not a warning"
+    row = json.loads(pat["bolus_pattern_table"])["islands"][0]
+    assert row["warn"] and row["kind"] == "deficit" and row["area_ratio"] == pytest.approx(ratio, abs=2e-3)
+    # the advice holds: in 4 patches the worst piece is much better
+    assert bpy.ops.bolus.segment(patches=4) == {"FINISHED"}
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    worst = max(r["EL"] for r in json.loads(pattern_of(bpy, src)["bolus_pattern_table"])["islands"])
+    assert worst < 0.6 * m["EL"], (worst, m["EL"])
+
+
+def test_thirty_degree_cap_is_not_warned(bpy_addon, scene, capfd):
+    bpy = bpy_addon
+    src = cap_in_one_patch(bpy, 30.0)
+    capfd.readouterr()
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    out = reports(capfd)
+    assert warning_lines(out) == [], out
+    row = json.loads(pattern_of(bpy, src)["bolus_pattern_table"])["islands"][0]
+    assert not row["warn"] and row["EL"] < 0.03 and row["EA"] < 0.03
+
+
+@pytest.fixture
+def settings(scene):
+    """Scene.bolus, its warning threshold back to the default (3 %) after the test."""
+    yield scene.bolus
+    scene.bolus.property_unset("warn_distortion_pct")
+
+
+def test_warning_threshold_is_the_scene_setting(bpy_addon, settings, capfd):
+    bpy = bpy_addon
+    src = cap_in_one_patch(bpy, 120.0)
+    assert settings.warn_distortion_pct == 3.0
+    settings.warn_distortion_pct = 40.0
+    capfd.readouterr()
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    out = reports(capfd)
+    table = json.loads(pattern_of(bpy, src)["bolus_pattern_table"])
+    assert table["warn_pct"] == 40.0 and table["islands"][0]["EL"] > 0.1
+    assert not any("not fit to cut" in ln or "limit" in ln for ln in warning_lines(out)), out
+    # just under the piece's worst figure: warned again, naming the limit
+    row = table["islands"][0]
+    limit = round(100 * max(row["EL"], row["EA"]) - 0.5, 1)
+    settings.warn_distortion_pct = limit
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert any(f"above the {limit:g} % limit" in ln for ln in warning_lines(reports(capfd)))
+
+
+def test_nostril_pocket_gets_the_cavity_advice(bpy_addon, scene, capfd):
+    """A nostril pocket of a held-out scan (nefertiti.obj, mm): the advice is to leave the cavity
+    out, split it or print, not to segment into more patches (that made nostrils worse)."""
+    from conftest import shared_mesh
+
+    from bolus_addon.core.objfile import load_obj
+
+    bpy = bpy_addon
+    V, F, _ = load_obj(shared_mesh("nefertiti.obj"))
+    d = np.linalg.norm(V - [-5.0, -14.0, 169.0], axis=1)  # right nostril, below the tip (3.6, -8.3, 181.2)
+    sel = (d[F] <= 12.0).all(axis=1)
+    used, inv = np.unique(F[sel], return_inverse=True)
+    src = make_object(bpy, V[used], inv.reshape(-1, 3), name="nostril", scale_length=0.001)
+    capfd.readouterr()
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    out = reports(capfd)
+    piece = [ln for ln in warning_lines(out) if ln.startswith("Warning: Patch 0: EL")]
+    assert len(piece) == 1, out
+    assert "angle excess" in piece[0] and "more patches will not help" in piece[0]
+    assert "leave the cavity out" in piece[0] and "printed bolus" in piece[0]
+    assert "segment it into more" not in out
+    assert json.loads(pattern_of(bpy, src)["bolus_pattern_table"])["islands"][0]["kind"] == "excess"
+
+
+def test_core_advice_to_segment_more_is_not_passed_on(bpy_addon):
+    from bolus_addon.pattern_ops import core_notes
+
+    warnings, infos = core_notes([
+        "started from a conformal map: the coordinate transformation of 4.5.1 folded over",
+        "the pattern overlaps itself (12 triangles): the patch is too curved to lie flat in one piece; "
+        "segment it into more patches",
+        "3 triangles remain flipped after the overlap correction",
+    ])
+    assert infos == ["started from a conformal map: the coordinate transformation of 4.5.1 folded over"]
+    assert warnings == ["the pattern overlaps itself (12 triangles): the patch is too curved to lie flat in one piece",
+                        "3 triangles remain flipped after the overlap correction"]
+
+
+# =========================================================================== 11. smaller ones
+def test_unfold_with_the_pattern_active_is_refused(bpy_addon, scene):
+    """Issue 9 item 7: it used to make '<name>_pattern_pattern'."""
+    bpy = bpy_addon
+    src = make_object(bpy, *cylinder_piece(na=6, nl=4), name="skin", scale_length=0.001)
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    bpy.context.view_layer.objects.active = pattern_of(bpy, src)
+    n = len(bpy.data.meshes)
+    with pytest.raises(RuntimeError, match="'skin_pattern' is a pattern made by Unfold: select its source 'skin'"):
+        bpy.ops.bolus.unfold()
+    assert pattern_objects(bpy) == ["skin_pattern"] and len(bpy.data.meshes) == n
+    bpy.context.view_layer.objects.active = src
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert pattern_objects(bpy) == ["skin_pattern"]
+
+
+def test_faces_outside_the_patches_are_an_info_said_once(bpy_addon, scene, capfd):
+    """Issue 9 item 7: unfolding a mesh segmented in a region warned "N faces in no patch were left out"."""
+    bpy = bpy_addon
+    V, F = cylinder_piece(na=6, nl=4)
+    src = make_object(bpy, V, F, name="skin", scale_length=0.001)
+    C = V[F].mean(axis=1)
+    outside = np.arctan2(C[:, 1], C[:, 0]) < np.pi / 3  # a third of the half cylinder: outside the region
+    labels = np.where(outside, -1, 0).astype(np.int32)
+    src.data.attributes.new("bolus_patch", "INT", "FACE").data.foreach_set("value", labels)
+    capfd.readouterr()
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    out = reports(capfd)
+    lines = [ln for ln in out.splitlines() if "left out" in ln]
+    assert lines == [f"Info: {outside.sum()} faces outside the segmented patches (bolus_patch = -1) were left out "
+                     "of the pattern"], out
+    assert warning_lines(out) == [], out
