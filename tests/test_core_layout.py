@@ -4,6 +4,7 @@ import pytest
 from meshgen import grid
 
 from bolus_addon.core.errors import BolusError
+from bolus_addon.core.geometry2d import cross2d
 from bolus_addon.core.layout import orient_island, pack_islands, pack_transforms, rotate
 
 
@@ -13,7 +14,7 @@ def edge_lengths(UV, F):
 
 def signed_areas(UV, F):
     a, b, c = UV[F[:, 0]], UV[F[:, 1]], UV[F[:, 2]]
-    return 0.5 * ((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0])
+    return 0.5 * cross2d(b - a, c - a)
 
 
 def islands_fixture(seed=0):

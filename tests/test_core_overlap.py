@@ -8,6 +8,7 @@ from scipy.sparse.linalg import splu
 
 from bolus_addon.core.cutting import boundary_loops, cut_to_disk
 from bolus_addon.core.errors import BolusError
+from bolus_addon.core.geometry2d import cross2d
 from bolus_addon.core.objfile import load_obj
 from bolus_addon.core.overlap import (
     boundary_edge_array,
@@ -41,7 +42,7 @@ def brute_force_overlaps(UV, F, tol=1e-9):
             if i == j:
                 continue
             T = UV[F[j]]
-            d = [np.cross(T[(k + 1) % 3] - T[k], S - T[k]) for k in range(3)]
+            d = [cross2d(T[(k + 1) % 3] - T[k], S - T[k]) for k in range(3)]
             inside = (np.all(np.array(d) > tol, axis=0) | np.all(np.array(d) < -tol, axis=0))
             if inside.any():
                 hit[i] = hit[j] = True

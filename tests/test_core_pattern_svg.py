@@ -6,6 +6,7 @@ import pytest
 from meshgen import grid
 
 from bolus_addon.core.errors import BolusError
+from bolus_addon.core.geometry2d import cross2d
 from bolus_addon.core.layout import pack_islands
 from bolus_addon.core.pattern_svg import (
     SCALE_BAR_MM,
@@ -50,7 +51,7 @@ def is_simple(P):
             if i == 0 and j == k - 1:
                 continue
             d1, d2 = B[i] - A[i], B[j] - A[j]
-            den = d1[0] * d2[1] - d1[1] * d2[0]
+            den = cross2d(d1, d2)
             if abs(den) <= 1e-12 * np.linalg.norm(d1) * np.linalg.norm(d2):  # parallel: touching ends?
                 ends_j = point_segment_distance(np.array([A[j], B[j]]), np.array([A[i], B[i]]))
                 ends_i = point_segment_distance(np.array([A[i], B[i]]), np.array([A[j], B[j]]))
@@ -58,8 +59,8 @@ def is_simple(P):
                     return False
                 continue
             q = A[j] - A[i]
-            t = (q[0] * d2[1] - q[1] * d2[0]) / den
-            u = (q[0] * d1[1] - q[1] * d1[0]) / den
+            t = cross2d(q, d2) / den
+            u = cross2d(q, d1) / den
             if -1e-12 <= t <= 1 + 1e-12 and -1e-12 <= u <= 1 + 1e-12:
                 return False
     return True
@@ -110,7 +111,7 @@ def test_outline_of_ragged_cell_patches_adds_up_to_their_area(seed):
     UV = V[:, :2]
     cell = np.concatenate([np.arange(100)] * 2)
     F = F[(g.random(100) < 0.6)[cell] & (g.random(len(F)) < 0.93)]
-    area = 0.5 * np.cross(UV[F[:, 1]] - UV[F[:, 0]], UV[F[:, 2]] - UV[F[:, 0]]).sum()
+    area = 0.5 * cross2d(UV[F[:, 1]] - UV[F[:, 0]], UV[F[:, 2]] - UV[F[:, 0]]).sum()
     loops = outline_loops(UV, F)
     assert sum(signed_area(L) for L in loops) == pytest.approx(area, rel=1e-12)  # outer +, holes -
     assert signed_area(loops[0]) > 0

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import BolusError
+from .geometry2d import cross2d
 
 __all__ = [
     "signed_areas",
@@ -64,15 +65,11 @@ def _mean_edge_length(UV, F) -> float:
     return float(L) if L > 0 else 1.0
 
 
-def _cross2(a, b):
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
 def signed_areas(UV, F) -> np.ndarray:
     """Signed areas (m,) of the triangles F (m,3) in UV (n,2); positive = counter-clockwise."""
     UV, F = _as_uv(UV, F)
     P = UV[F]
-    return 0.5 * _cross2(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+    return 0.5 * cross2d(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
 
 
 def flipped_faces(UV, F, rel_tol: float = 1e-12) -> np.ndarray:
@@ -186,10 +183,10 @@ def segment_intersections(P, E, rel_tol: float = REL_TOL, scale: float | None = 
     share = (E[i, 0] == E[j, 0]) | (E[i, 0] == E[j, 1]) | (E[i, 1] == E[j, 0]) | (E[i, 1] == E[j, 1])
     i, j = i[~share], j[~share]
     a, b, c, d = A[i], B[i], A[j], B[j]
-    o1 = _cross2(b - a, c - a)
-    o2 = _cross2(b - a, d - a)
-    o3 = _cross2(d - c, a - c)
-    o4 = _cross2(d - c, b - c)
+    o1 = cross2d(b - a, c - a)
+    o2 = cross2d(b - a, d - a)
+    o3 = cross2d(d - c, a - c)
+    o4 = cross2d(d - c, b - c)
     cross = (((o1 > eps) & (o2 < -eps)) | ((o1 < -eps) & (o2 > eps))) & (
         ((o3 > eps) & (o4 < -eps)) | ((o3 < -eps) & (o4 > eps))
     )
@@ -268,13 +265,13 @@ def overlapping_face_pairs(UV, F, rel_tol: float = REL_TOL) -> np.ndarray:
             uv = UV[v] - UV[u]
             luv = np.linalg.norm(uv, axis=1)
             luv = np.where(luv > 0, luv, np.inf)
-            si = _cross2(uv, UV[opp_i] - UV[u]) / luv
-            sj = _cross2(uv, UV[opp_j] - UV[u]) / luv
+            si = cross2d(uv, UV[opp_i] - UV[u]) / luv
+            sj = cross2d(uv, UV[opp_j] - UV[u]) / luv
             hit[g] = ((si > tol) & (sj > tol)) | ((si < -tol) & (sj < -tol))
         g = nshared == 3
         if g.any():
             Pi = P[i[g]]
-            hit[g] = np.abs(_cross2(Pi[:, 1] - Pi[:, 0], Pi[:, 2] - Pi[:, 0])) > tol * tol
+            hit[g] = np.abs(cross2d(Pi[:, 1] - Pi[:, 0], Pi[:, 2] - Pi[:, 0])) > tol * tol
         out.append(np.stack([i[hit], j[hit]], axis=1))
     return np.concatenate(out) if out else np.zeros((0, 2), dtype=np.int64)
 

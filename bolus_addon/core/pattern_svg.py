@@ -28,6 +28,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from .errors import BolusError
+from .geometry2d import cross2d
 
 __all__ = [
     "outline_loops",
@@ -67,8 +68,8 @@ def _winding(Q: np.ndarray, A: np.ndarray, B: np.ndarray) -> np.ndarray:
     step = max(1, 2_000_000 // len(A))
     for lo in range(0, len(Q), step):
         q = Q[lo:lo + step]
-        qx, qy = q[:, 0:1], q[:, 1:2]
-        cross = R[:, 0] * (qy - A[:, 1]) - R[:, 1] * (qx - A[:, 0])  # > 0: q left of the segment
+        qy = q[:, 1:2]
+        cross = cross2d(R, q[:, None, :] - A)  # (t, s) > 0: q left of the segment
         up = (A[:, 1] <= qy) & (B[:, 1] > qy) & (cross > 0)
         down = (B[:, 1] <= qy) & (A[:, 1] > qy) & (cross < 0)
         w[lo:lo + step] = up.sum(axis=1) - down.sum(axis=1)
@@ -101,12 +102,12 @@ def _ray_winding_x(Q: np.ndarray, T: np.ndarray, A: np.ndarray, B: np.ndarray, e
             continue
         a, r = A[cand], R[cand]
         qx, qy = q[:, 0:1], q[:, 1:2]
-        cross = r[:, 0] * (qy - a[:, 1]) - r[:, 1] * (qx - a[:, 0])  # > 0: q left of the segment
+        cross = cross2d(r, q[:, None, :] - a)  # (c, s) > 0: q left of the segment
         up = (a[:, 1] <= qy) & (a[:, 1] + r[:, 1] > qy)
         down = (a[:, 1] + r[:, 1] <= qy) & (a[:, 1] > qy)
         tn = t / np.linalg.norm(t, axis=1, keepdims=True)
         along_t = tn @ r.T  # (c, s)
-        parallel = np.abs(tn[:, 0:1] * r[:, 1] - tn[:, 1:2] * r[:, 0]) <= 1e-9 * np.sqrt(RR[cand])
+        parallel = np.abs(cross2d(tn[:, None, :], r)) <= 1e-9 * np.sqrt(RR[cand])
         proj = (qx - a[:, 0]) * r[:, 0] + (qy - a[:, 1]) * r[:, 1]
         on = parallel & (np.abs(cross) <= eps * np.sqrt(RR[cand])) & (proj >= 0) & (proj <= RR[cand])
         w[idx] = ((up & (cross > 0) & ~on).sum(axis=1) - (down & (cross < 0) & ~on).sum(axis=1))
@@ -242,7 +243,7 @@ def _simplify(P: np.ndarray, tol: float) -> np.ndarray:
             continue
         a, b = P - np.roll(P, 1, axis=0), np.roll(P, -1, axis=0) - P
         c = np.roll(P, -1, axis=0) - np.roll(P, 1, axis=0)
-        cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+        cross = cross2d(a, b)
         # distance of the point from the chord of its neighbours, and the point between them
         straight = (np.abs(cross) <= tol * np.linalg.norm(c, axis=1)) & (np.einsum("ij,ij->i", a, b) > 0)
         if not straight.any():
@@ -264,7 +265,7 @@ def _raw_offset(Q: np.ndarray, d: float) -> np.ndarray:
     T = T / np.linalg.norm(T, axis=1, keepdims=True)  # edge i: Q[i] -> Q[i+1]
     N = np.stack([T[:, 1], -T[:, 0]], axis=1)  # right-hand normals
     Ta, Na = np.roll(T, 1, axis=0), np.roll(N, 1, axis=0)  # edge coming into vertex i
-    cross = Ta[:, 0] * T[:, 1] - Ta[:, 1] * T[:, 0]
+    cross = cross2d(Ta, T)
     cos = np.einsum("ij,ij->i", Ta, T)
     pa, pb = Q + d * Na, Q + d * N
     spike = (np.abs(cross) <= 1e-12) & (cos < 0)
@@ -301,9 +302,9 @@ def _region_boundary(A: np.ndarray, B: np.ndarray, inside, eps: float) -> list[n
         hi = min(s, lo + step)
         Ri, Ai = R[lo:hi, None, :], A[lo:hi, None, :]
         D = A[None, :, :] - Ai  # (c, s, 2): A_j - A_i
-        den = Ri[..., 0] * R[None, :, 1] - Ri[..., 1] * R[None, :, 0]
-        num_t = D[..., 0] * R[None, :, 1] - D[..., 1] * R[None, :, 0]
-        num_u = D[..., 0] * Ri[..., 1] - D[..., 1] * Ri[..., 0]
+        den = cross2d(Ri, R[None, :, :])
+        num_t = cross2d(D, R[None, :, :])
+        num_u = cross2d(D, Ri)
         ok = np.abs(den) > 1e-12 * np.sqrt(RR[lo:hi, None] * RR[None, :])
         with np.errstate(divide="ignore", invalid="ignore"):
             t, u = num_t / den, num_u / den

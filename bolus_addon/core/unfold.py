@@ -53,6 +53,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from .cutting import cut_to_disk
 from .errors import BolusError
+from .geometry2d import cross2d
 from .layout import pack_islands
 from .overlap import boundary_edge_array, boundary_self_intersections, overlapping_faces, signed_areas
 from .topology import MeshTopology
@@ -486,7 +487,7 @@ def _place_third(Pi, Pj, beta_i, beta_j, away_from):
     u = e / np.maximum(l1, 1e-300)[:, None]
     s = np.sin(np.clip(beta_i + beta_j, 1e-9, np.pi - 1e-9))
     r = l1 * np.sin(beta_j) / s
-    side_ref = np.sign(u[:, 0] * (away_from[:, 1] - Pi[:, 1]) - u[:, 1] * (away_from[:, 0] - Pi[:, 0]))
+    side_ref = np.sign(cross2d(u, away_from - Pi))
     side_ref[side_ref == 0] = -1.0
     ang = -side_ref * beta_i  # rotate u towards the side away from the reference
     return Pi + r[:, None] * _rot(u, ang)
@@ -497,7 +498,7 @@ def _place_at(Pi, Pj, beta_i, length, away_from):
     of the line away from ``away_from`` (all (k,2) / (k,))."""
     e = Pj - Pi
     u = e / np.maximum(np.linalg.norm(e, axis=1), 1e-300)[:, None]
-    side_ref = np.sign(u[:, 0] * (away_from[:, 1] - Pi[:, 1]) - u[:, 1] * (away_from[:, 0] - Pi[:, 0]))
+    side_ref = np.sign(cross2d(u, away_from - Pi))
     side_ref[side_ref == 0] = -1.0
     return Pi + length[:, None] * _rot(u, -side_ref * beta_i)
 
@@ -652,7 +653,7 @@ def initial_unfolding(topo: MeshTopology, directions: int = STRIPE_DIRECTIONS,
             Pp = P[placed_face]
             a_ = np.roll(Pp, -1, axis=1) - Pp
             b_ = np.roll(Pp, -2, axis=1) - Pp
-            cr = a_[..., 0] * b_[..., 1] - a_[..., 1] * b_[..., 0]
+            cr = cross2d(a_, b_)
             placed_ang[placed_face] = np.arctan2(np.abs(cr), np.einsum("mkc,mkc->mk", a_, b_))
         beta_sum = np.bincount(F.ravel(), weights=placed_ang.ravel(), minlength=n)
         alpha_free = np.bincount(F[~placed_face].ravel(), weights=alpha[~placed_face].ravel(), minlength=n)
@@ -840,7 +841,7 @@ def outline_term(verts: np.ndarray, edges: np.ndarray, lengths: np.ndarray, n: i
         Q = x.reshape(n, 2)
         v, c, d = Q[verts], Q[edges[:, 0]], Q[edges[:, 1]]
         e, r = d - c, v - c
-        s = (e[:, 0] * r[:, 1] - e[:, 1] * r[:, 0]) / lengths
+        s = cross2d(e, r) / lengths
         viol = np.maximum(s + margin, 0.0)
         coef = weight * viol / lengths  # dE/d(cross product)
         gv = np.stack([-e[:, 1], e[:, 0]], 1) * coef[:, None]
