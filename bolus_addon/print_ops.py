@@ -11,7 +11,8 @@
   best orientation as the first row (the seed's Tables 6-1, 6-2), a table on the
   source.
 * `export_parts` writes one binary STL per part in millimetres with Blender's own STL
-  exporter.
+  exporter, each part at the origin (its XY bounding box centred there, its lowest
+  point on z = 0), as a slicer expects; the part objects keep their layout.
 
 Bolus shells are often open surfaces: each face counts once with its normal as given
 (core.print_orientation); the report says so when the part is open.
@@ -21,6 +22,7 @@ from __future__ import annotations
 import json
 import os
 import re
+from contextlib import contextmanager
 
 import bpy
 import numpy as np
@@ -262,6 +264,37 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
             pob[PROP_PART_INDEX] = p
 
 
+@contextmanager
+def _at_origin(context, part: bpy.types.Object):
+    """Move `part` for the time of an export so that the centre of its XY bounding box is at
+    the origin and its lowest point on z = 0 (world space, modifiers applied); its own
+    transform comes back afterwards.  The layout of orient_parts puts the parts side by
+    side along X: a printer's slicer wants each STL at the origin on the plate."""
+    ev = part.evaluated_get(context.evaluated_depsgraph_get())
+    me = ev.to_mesh()
+    try:
+        co = np.empty(len(me.vertices) * 3)
+        me.vertices.foreach_get("co", co)
+    finally:
+        ev.to_mesh_clear()
+    M = np.array(part.matrix_world, dtype=np.float64)
+    W = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+    location = part.location.copy()  # only the location moves: restored bit for bit
+    if len(W):
+        lo, hi = W.min(axis=0), W.max(axis=0)
+        shift = np.array([-(lo[0] + hi[0]) / 2.0, -(lo[1] + hi[1]) / 2.0, -lo[2]])
+        if part.parent is not None:  # the location lives in the parent's frame
+            P = np.array(part.parent.matrix_world, dtype=np.float64) @ np.array(part.matrix_parent_inverse)
+            shift = np.linalg.solve(P[:3, :3], shift)
+        part.location = tuple(np.array(location) + shift)
+        context.view_layer.update()
+    try:
+        yield
+    finally:
+        part.location = location
+        context.view_layer.update()
+
+
 class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
     """Write every oriented print part as a binary STL file in millimetres"""
 
@@ -300,7 +333,8 @@ class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
                 for o in context.view_layer.objects:
                     o.select_set(o is part)
                 context.view_layer.objects.active = part
-                _stl_export(path, scale)
+                with _at_origin(context, part):
+                    _stl_export(path, scale)
                 written.append(path)
         finally:
             for o in context.view_layer.objects:
@@ -308,7 +342,7 @@ class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
             context.view_layer.objects.active = was_active
             if was_mode != "OBJECT" and was_active is obj:
                 bpy.ops.object.mode_set(mode=was_mode)
-        self.report({"INFO"}, f"Wrote {len(written)} STL files (binary, mm) to {folder}: "
+        self.report({"INFO"}, f"Wrote {len(written)} STL files (binary, mm, each at the origin on z = 0) to {folder}: "
                     + ", ".join(os.path.basename(p) for p in written))
         return {"FINISHED"}
 

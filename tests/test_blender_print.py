@@ -384,23 +384,35 @@ def test_export_parts_stl(bpy_addon, scene, tmp_path):
     parts = [bpy.data.objects[n] for n in part_names(bpy, ob.name)]
     assert len(parts) >= 2
     bpy.context.view_layer.objects.active = ob
-    assert bpy.ops.bolus.export_parts(directory=str(tmp_path)) == {"FINISHED"}
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f"{o.name}.stl" for o in parts)
+    transforms = {o.name: np.array(o.matrix_world) for o in parts}
     scale = mm_per_unit(bpy)
     assert scale == pytest.approx(10.0)
+    # the layout puts the parts side by side along X: most are far from the origin
+    centres = [(world(o).min(axis=0) + world(o).max(axis=0))[:2] / 2 * scale for o in parts]
+    assert max(np.linalg.norm(c) for c in centres) > 50.0, "test setup: parts laid out away from the origin"
+    assert bpy.ops.bolus.export_parts(directory=str(tmp_path)) == {"FINISHED"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f"{o.name}.stl" for o in parts)
     for part in parts:
+        # the part objects keep their place in the scene
+        np.testing.assert_array_equal(np.array(part.matrix_world), transforms[part.name])
         T, header = stl_triangles(tmp_path / f"{part.name}.stl")
         assert not header.startswith(b"solid")  # binary, not ASCII
         assert len(T) == len(loop_triangles(part.data)[0])
         Wp = world(part)
-        size_stl = T.reshape(-1, 3).max(axis=0) - T.reshape(-1, 3).min(axis=0)
+        P = T.reshape(-1, 3)
+        lo, hi = P.min(axis=0), P.max(axis=0)
         size_world = Wp.max(axis=0) - Wp.min(axis=0)
-        assert np.allclose(size_stl, size_world * scale, rtol=1e-3), (size_stl, size_world)
-        assert size_stl.max() > 50.0  # mm: a face part is centimetres, not millimetres, across
-        assert abs(T[:, :, 2].min()) < 1e-3
-        # the very same triangles, in mm
-        z_part = Wp[loop_triangles(part.data)[0]][:, :, 2].ravel() * scale
-        assert np.allclose(np.sort(T[:, :, 2].ravel()), np.sort(z_part), atol=1e-3)
+        assert np.allclose(hi - lo, size_world * scale, rtol=1e-3), (hi - lo, size_world)
+        assert (hi - lo).max() > 50.0  # mm: a face part is centimetres, not millimetres, across
+        # each STL at the origin: XY bounding box centred on it, resting on z = 0 (issue 9 item 7)
+        assert np.abs((lo + hi)[:2] / 2).max() < 1e-3, (lo, hi)
+        assert abs(lo[2]) < 1e-3
+        # the very same triangles, in mm, only moved
+        W_mm = Wp * scale
+        shift = np.r_[-(W_mm.min(axis=0) + W_mm.max(axis=0))[:2] / 2, -W_mm[:, 2].min()]
+        expect = W_mm[loop_triangles(part.data)[0]] + shift
+        for ax in range(3):
+            assert np.allclose(np.sort(T[:, :, ax].ravel()), np.sort(expect[:, :, ax].ravel()), atol=1e-3)
 
 
 # --------------------------------------------------------------- skin side up
