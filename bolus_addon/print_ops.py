@@ -30,6 +30,7 @@ from bpy.props import StringProperty
 from mathutils import Matrix
 
 from . import mesh_io
+from .compat import stl_export as _stl_export  # version differences live in compat
 from .core.colormap import categorical_linear_rgba
 from .core.errors import BolusError
 from .core.print_orientation import CRITICAL_ANGLE_DEG, orient, overhang_faces
@@ -345,17 +346,6 @@ class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
         self.report({"INFO"}, f"Wrote {len(written)} STL files (binary, mm, each at the origin on z = 0) to {folder}: "
                     + ", ".join(os.path.basename(p) for p in written))
         return {"FINISHED"}
-
-
-def _stl_export(path: str, mm_per_unit: float) -> None:
-    """Binary STL of the selected object in mm, world space (Blender's exporter, 4.2+)."""
-    if hasattr(bpy.ops.wm, "stl_export"):
-        bpy.ops.wm.stl_export(filepath=path, ascii_format=False, export_selected_objects=True,
-                              global_scale=mm_per_unit, use_scene_unit=False, apply_modifiers=True,
-                              forward_axis="Y", up_axis="Z")
-    else:  # pragma: no cover - Blender builds with the legacy Python exporter only
-        bpy.ops.export_mesh.stl(filepath=path, ascii=False, use_selection=True, global_scale=mm_per_unit,
-                                use_scene_unit=False, use_mesh_modifiers=True, axis_forward="Y", axis_up="Z")
 
 
 classes = (BOLUS_OT_print_segment, BOLUS_OT_orient_parts, BOLUS_OT_export_parts)
