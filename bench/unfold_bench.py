@@ -78,7 +78,6 @@ TARGET_TIME = 1.0
 TIME_TARGET_PATCH = "cap 60deg"
 
 BLENDER_METHODS = ("ANGLE_BASED", "CONFORMAL", "MINIMUM_STRETCH")
-MIN_STRETCH_VERSION = (4, 3, 0)
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -368,8 +367,10 @@ def true_scale(V, F, UV):
 
 def run_blender(bpy, ob, cut, method: str, repeat: int) -> dict:
     row = {"method": f"blender {method}"}
-    if method == "MINIMUM_STRETCH" and tuple(bpy.app.version) < MIN_STRETCH_VERSION:
-        row["na"] = f"n/a (Blender {bpy.app.version_string} < 4.3)"
+    from bolus_addon import compat
+
+    if not compat.has_uv_unwrap_method(method):  # MINIMUM_STRETCH: Blender 4.3+
+        row["na"] = f"n/a (Blender {bpy.app.version_string} has no uv.unwrap {method})"
         return row
     me = ob.data
     times, messages = [], []
@@ -536,6 +537,7 @@ def print_summary(rows: list[dict], args) -> None:
 def warm_up(bpy) -> None:
     """One small unfold and unwrap of each kind, so no timed call pays for imports or first-use set-up."""
     import meshgen
+    from bolus_addon import compat
     from bolus_addon.core.cutting import cut_to_disk
     from bolus_addon.core.unfold import unfold_patch
 
@@ -546,7 +548,7 @@ def warm_up(bpy) -> None:
     cut = cut_to_disk(V, F)
     ob = build_object(bpy, cut)
     for M in BLENDER_METHODS:
-        if M == "MINIMUM_STRETCH" and tuple(bpy.app.version) < MIN_STRETCH_VERSION:
+        if not compat.has_uv_unwrap_method(M):
             continue
         run_blender(bpy, ob, cut, M, 1)
     clean_scene(bpy)
