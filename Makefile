@@ -1,34 +1,78 @@
 # make demo  - run the main job on the built-in example and write out/
-# make test  - the whole test suite (core, Blender 5.0 and a Blender 4.2 LTS smoke subset)
+# make test  - the whole test suite on Blender 5.0.1 and 5.2.3, the smoke subset on 4.5 LTS and 4.2 LTS
+# make test-core - the bpy-free tests only (Blender 5.0.1's venv)
 # make bench - benchmarks (printed, not asserted)
 # make extension - the installable extension zip in dist/ (Blender's own builder, from bpy)
-# make extension-wheels - one zip per platform in dist/, with scipy and scikit-learn inside
-PYTHON ?= $(shell command -v python3.11 || command -v python3)
+# make extension-wheels - one zip per platform in dist/, with scipy and scikit-learn (cp311 and cp313) inside
+#
+# One venv per Blender, each from its pinned requirements file and stamped .installed:
+#   .venv/   bpy 5.0.1, Python 3.11, numpy 1.26  requirements.txt       whole suite
+#   .venv52/ bpy 5.2.3, Python 3.13, numpy 2     requirements-bpy52.txt whole suite
+#   .venv45/ bpy 4.5 LTS, Python 3.11            requirements-bpy45.txt smoke subset
+#   .venv42/ bpy 4.2.0 LTS, Python 3.11          requirements-bpy42.txt smoke subset
+
+# A *working* interpreter of the given version: a pyenv shim on PATH fails unless pyenv selects
+# that version, so every candidate (PATH, pyenv's versions/X.Y.*, /usr/local/bin, /usr/bin) must
+# answer --version with it.
+# (${shell ...}: the braces let the shell's `case ... )` through.)
+find_python = ${shell for p in python$(1) $$(pyenv root 2>/dev/null || echo "$${PYENV_ROOT:-$$HOME/.pyenv}")/versions/$(1).*/bin/python$(1) \
+	/usr/local/bin/python$(1) /usr/bin/python$(1); do \
+	case "$$($$p --version 2>/dev/null)" in "Python $(1)."*) command -v $$p; break;; esac; done}
+ifeq ($(origin PYTHON),undefined)
+PYTHON := $(or $(call find_python,3.11),$(shell command -v python3))
+endif
+ifeq ($(origin PYTHON313),undefined)
+PYTHON313 := $(call find_python,3.13)
+endif
+
 VENV   := .venv
+VENV52 := .venv52
+VENV45 := .venv45
 VENV42 := .venv42
-BPY_LTS := 4.2.0
 PY     := $(VENV)/bin/python
+PY52   := $(VENV52)/bin/python
+PY45   := $(VENV45)/bin/python
 PY42   := $(VENV42)/bin/python
+PIP_INSTALL := -m pip install --quiet --disable-pip-version-check
+NO_PY313 := SKIPPED: the Blender 5.2.3 run (.venv52) -- no working Python 3.13 found (python3.13 on PATH, \
+pyenv's versions/3.13.*, /usr/local/bin, /usr/bin); install one or pass PYTHON313=/path/to/python3.13
 
 .PHONY: demo test test-core bench extension extension-wheels clean
 
 $(VENV)/.installed: requirements.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt
+	$(PY) $(PIP_INSTALL) -r requirements.txt
 	touch $@
 
-$(VENV42)/.installed: requirements.txt
+$(VENV52)/.installed: requirements-bpy52.txt
+	@test -x $(PY52) || test -n "$(PYTHON313)" || { echo "$(NO_PY313)"; exit 1; }
+	test -x $(PY52) || $(PYTHON313) -m venv $(VENV52)
+	$(PY52) $(PIP_INSTALL) -r requirements-bpy52.txt
+	touch $@
+
+$(VENV45)/.installed: requirements-bpy45.txt
+	test -x $(PY45) || $(PYTHON) -m venv $(VENV45)
+	$(PY45) $(PIP_INSTALL) -r requirements-bpy45.txt
+	touch $@
+
+$(VENV42)/.installed: requirements-bpy42.txt
 	test -x $(PY42) || $(PYTHON) -m venv $(VENV42)
-	grep -v '^bpy==' requirements.txt > $(VENV42)/requirements-lts.txt
-	$(PY42) -m pip install --quiet --disable-pip-version-check -r $(VENV42)/requirements-lts.txt bpy==$(BPY_LTS)
+	$(PY42) $(PIP_INSTALL) -r requirements-bpy42.txt
 	touch $@
 
 demo: $(VENV)/.installed
 	$(PY) scripts/demo.py --out out
 
-test: $(VENV)/.installed $(VENV42)/.installed
-	$(PY) -m pytest tests
-	$(PY42) -m pytest tests -m smoke
+# Every run goes ahead even when an earlier one failed; the target fails if any did.
+test: $(VENV)/.installed $(VENV45)/.installed $(VENV42)/.installed $(if $(PYTHON313),$(VENV52)/.installed)
+	@rc=0; \
+	echo "== Blender 5.0.1 (Python 3.11, numpy 1.26): whole suite"; $(PY) -m pytest tests || rc=1; \
+	if [ -n "$(PYTHON313)" ]; then \
+	  echo "== Blender 5.2.3 (Python 3.13, numpy 2): whole suite"; $(PY52) -m pytest tests || rc=1; \
+	else echo "$(NO_PY313)"; fi; \
+	echo "== Blender 4.5 LTS: smoke subset"; $(PY45) -m pytest tests -m smoke || rc=1; \
+	echo "== Blender 4.2 LTS: smoke subset"; $(PY42) -m pytest tests -m smoke || rc=1; \
+	exit $$rc
 
 test-core: $(VENV)/.installed
 	$(PY) -m pytest tests -m "not blender"
