@@ -11,7 +11,8 @@ in a scene where 1 unit = 1 mm, selects the treatment area around the nose in Ed
 2. bolus.segment           -> out/patches.png (jagged borders along mesh edges)
 3. bolus.smooth_cuts       -> out/cuts.png (the borders replaced by smooth cut lines;
                               close-ups before and after: cuts_before.png, cuts_after.png)
-4. bolus.unfold            -> out/pattern.png (the flat pattern, coloured by area distortion)
+4. bolus.unfold            -> out/pattern.png (the flat pattern, coloured by area distortion);
+                              pieces not fit to cut (EL or EA above 3 %) are warned with advice
 5. bolus.export_pattern    -> out/pattern.svg (true scale: print at 100 %)
 6. bolus.print_segment, bolus.orient_parts, bolus.export_parts
                            -> out/parts/*.stl (binary, mm), out/parts.png (the parts
@@ -315,9 +316,21 @@ def main():
         f"Pattern '{pattern.name}': EL {pattern_table['EL'] * 100:.2f} %, EA {pattern_table['EA'] * 100:.2f} %, "
         f"{pattern_table['flipped']} flipped faces (SPEC measures)"
     )
-    lines.append(f"{'patch':>5} {'triangles':>10} {'EL %':>7} {'EA %':>7} {'flipped':>8}  cut")
+    warn_pct = pattern_table.get("warn_pct", 3.0)
+    lines.append(f"{'piece':>16} {'triangles':>10} {'EL %':>7} {'EA %':>7} {'area':>6} {'flipped':>8} "
+                 f"{'excess':>7} {'deficit':>7}  fit to cut (EL, EA <= {warn_pct:g} %, no flips/overlaps)")
     for r in pattern_table["islands"]:
-        lines.append(f"{r['patch']:>5} {r['faces']:>10} {r['EL'] * 100:>7.3f} {r['EA'] * 100:>7.3f} {r['flipped']:>8}  {r['cut']}")
+        lines.append(f"{r.get('name', r['patch']):>16} {r['faces']:>10} {r['EL'] * 100:>7.3f} {r['EA'] * 100:>7.3f} "
+                     f"{r.get('area_ratio', float('nan')):>6.3f} {r['flipped']:>8} {r.get('excess_rad') or 0:>7.2f} "
+                     f"{r.get('deficit_rad') or 0:>7.2f}  {'NO: ' + r['short_advice'] if r.get('warn') else 'yes'}"
+                     + (f"  ({r['cut']})" if r["cut"] else ""))
+    bad = [r for r in pattern_table["islands"] if r.get("warn")]
+    if bad:
+        lines.append(f"{len(bad)} of {len(pattern_table['islands'])} pieces are not fit to cut as they are "
+                     "(the unfold operator's warnings):")
+        lines += [f"  {r['name']}: {r['advice']}" for r in bad]
+    else:
+        lines.append(f"Every piece is fit to cut (EL and EA at most {warn_pct:g} %).")
     lines.append(f"3D print: {len(parts)} parts (ABcut), layer {orient_table['layer_mm']:g} mm, overhang beyond 45 degrees "
                  "(Tables 6-1, 6-2; mm3)")
     lines.append(f"{'':>8} {'triangles':>10} {'area cm2':>9} {'WQ':>9} {'WU':>9} {'support':>9}  build direction")

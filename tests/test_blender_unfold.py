@@ -893,7 +893,7 @@ def test_nostril_pocket_gets_the_cavity_advice(bpy_addon, scene, capfd):
     out = reports(capfd)
     piece = [ln for ln in warning_lines(out) if ln.startswith("Warning: Patch 0: EL")]
     assert len(piece) == 1, out
-    assert "angle excess" in piece[0] and "more patches will not help" in piece[0]
+    assert "angle excess" in piece[0] and "more patches around a pocket make it worse" in piece[0]
     assert "leave the cavity out" in piece[0] and "printed bolus" in piece[0]
     assert "segment it into more" not in out
     assert json.loads(pattern_of(bpy, src)["bolus_pattern_table"])["islands"][0]["kind"] == "excess"

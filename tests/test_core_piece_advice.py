@@ -127,8 +127,9 @@ def test_saddle_and_dimple_are_excess():
     d = piece_advice(*dimple(), EA=0.05)
     assert d.kind == "excess" and d.excess_share == pytest.approx(0.5, abs=0.02)
     for adv in (a.advice, d.advice):
-        assert "more patches will not help" in adv
-        assert "leave the cavity out" in adv and "split it into separate pieces" in adv and "printed bolus" in adv
+        assert "more patches around a pocket make it worse" in adv
+        assert "leave the cavity out" in adv and "printed bolus" in adv
+        assert "split it into separate pieces along the groove" in adv
         assert "segment it into more" not in adv
 
 

@@ -18,7 +18,9 @@ The sign decides the remedy (issue 12, garment pattern making uses the same rule
 * an excess means more material than a flat sheet has room for: a cut makes the sides
   overlap and smaller patches around a pocket only make its rim worse (nostril
   pockets: EA 71 % at 6 patches).  The cavity has to leave the treatment area (deselect
-  it in Edit Mode), be split into separate pieces, or be covered by the printed bolus.
+  it in Edit Mode), be split into separate pieces along the groove (a split through
+  the excess does help: the demo's groove piece, EL 2.7 %, is 1.6 % and 1.3 % in two),
+  or be covered by the printed bolus.
 
 Scanner noise is bumps of both signs side by side: on the raw angle sums a noisy dome
 shows nearly as much excess as deficit.  `piece_advice` therefore measures X and D on
@@ -105,9 +107,10 @@ DEFICIT_ADVICE = (
 )
 EXCESS_ADVICE = (
     "the skin here has more angle than a flat sheet (angle excess {X:.2f} rad, deficit {D:.2f} rad: "
-    "a pocket rim, groove or fold, where the sheet would overlap), so more patches will not help: "
-    "leave the cavity out of the treatment area (deselect it in Edit Mode and segment again), "
-    "split it into separate pieces, or use the printed bolus"
+    "a pocket rim, groove or fold, where the sheet would overlap), so a dart would overlap and more "
+    "patches around a pocket make it worse: leave the cavity out of the treatment area (deselect it "
+    "in Edit Mode and segment again), split it into separate pieces along the groove, or use the "
+    "printed bolus"
 )
 SHORT_ADVICE = {
     "deficit": "dome: more patches or a dart",
