@@ -19,8 +19,11 @@ from .core.cutlines import smooth_cuts
 from .core.errors import BolusError
 from .core.saliency import analyse
 from .core.spectral import patch_stats
+from .core.topology import MeshTopology
 from .operators import ATTR_PATCH, ATTR_PATCH_COLOR, PROP_PATCH_TABLE, BolusOperator, check_topology
 
+#: the note of a border left as it is because it is already a smooth cut (core.cutlines)
+ALREADY_SMOOTH = "already smooth"
 #: ours: one row per border (method, turning before/after, shift), read by the panel
 PROP_CUT_TABLE = "bolus_cut_table"
 
@@ -50,34 +53,49 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
     bl_label = "Smooth Cut Lines"
 
     def run(self, context):
-        region = mesh_io.read_region(context, whole=True)
-        obj, me = region.obj, region.mesh
+        # the patch faces are the region (SPEC): read the mesh, keep the faces with bolus_patch >= 0
+        whole = mesh_io.read_region(context, whole=True)
+        obj, me = whole.obj, whole.mesh
         if me.shape_keys is not None:
             raise BolusError(
                 f"'{obj.name}' has shape keys; cutting would have to re-shape every key: apply or remove them first"
             )
-        # attribute data is empty while the mesh is in Edit Mode (it lives in the edit-mesh)
-        with mesh_io.object_mode(obj):
-            poly_labels = mesh_io.read_face_labels(me, ATTR_PATCH)
+        poly_labels = mesh_io.read_face_labels(obj, ATTR_PATCH)  # safe in Edit Mode
         if poly_labels is None:
             raise BolusError(f"'{obj.name}' has no '{ATTR_PATCH}' attribute: run Segment into Patches first")
-        from .core.topology import MeshTopology
-
+        inside = poly_labels[whole.tri_poly] >= 0
+        if not inside.any():
+            raise BolusError(f"no face of '{obj.name}' belongs to a patch: run Segment into Patches first")
+        region = mesh_io.subregion(whole, inside)
+        labels = poly_labels[region.tri_poly]
         topo = MeshTopology(region.V, region.F)
         warnings = region.warnings + check_topology(topo, allow_nonmanifold=False)
-        labels = poly_labels[region.tri_poly]
+        pairs = topo.face_adjacency_pairs
+        if len(np.unique(labels)) < 2 or not (labels[pairs[:, 0]] != labels[pairs[:, 1]]).any():
+            self.warn_all(warnings)
+            why = ("there is only one patch" if len(np.unique(labels)) < 2 else "the patches do not share any border")
+            self.report({"INFO"}, f"Nothing to smooth on '{obj.name}': {why} (Segment into Patches with 2 or more "
+                                  "patches makes borders to smooth); the mesh was not changed")
+            return {"FINISHED"}
         smoothing = 0.0
         if PROP_PATCH_TABLE in obj:
             try:
                 smoothing = float(json.loads(obj[PROP_PATCH_TABLE]).get("smoothing_mm", 0.0))
             except (ValueError, TypeError, AttributeError):
                 smoothing = 0.0
-        self.progress(0.05)
+        self.progress(0.05, "smooth cut lines")
         res = smooth_cuts(region.V, region.F, labels, progress=lambda f, t: self.progress(0.05 + 0.75 * f, t))
-        self.progress(0.8)
+        borders = [b.as_dict() for b in res.borders]
+        if not res.changed:
+            self.warn_all(warnings)
+            self.report({"INFO"}, f"Nothing to change on '{obj.name}': none of its {len(borders)} borders can be made "
+                                  "smoother (already smooth cut lines, or too short to fit); the mesh was not changed")
+            for r in borders:
+                self.report({"INFO"}, format_cut_row(r))
+            return {"FINISHED"}
+        self.progress(0.8, "patch figures")
         before = _stats(region.V, region.F, labels, smoothing)
         after = _stats(res.V, res.F, res.labels, smoothing)
-        borders = [b.as_dict() for b in res.borders]
         with mesh_io.object_mode(obj):
             new_labels = mesh_io.apply_cuts(me, region, res, ATTR_PATCH)
             seams = mesh_io.polygon_edge_labels(me, new_labels)
@@ -93,17 +111,15 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
         obj[PROP_PATCH_TABLE] = json.dumps(table)
         obj[PROP_CUT_TABLE] = json.dumps(borders)
         self.warn_all(warnings)
-        for r in borders:
-            if r["method"] == "unchanged":
-                self.report({"WARNING"}, format_cut_row(r))
         changed = sum(r["method"] != "unchanged" for r in borders)
         self.report(
             {"INFO"},
             f"Smoothed {changed} of {len(borders)} borders of '{obj.name}': {res.new_vertex_count} new vertices, "
             f"{int(res.split.sum())} triangles split",
         )
-        for r in borders:
-            self.report({"INFO"}, format_cut_row(r))
+        for r in borders:  # each border once: one that could not be smoothed is a warning
+            shortfall = r["method"] == "unchanged" and not r["note"].startswith(ALREADY_SMOOTH)
+            self.report({"WARNING"} if shortfall else {"INFO"}, format_cut_row(r))
         for b_row, a_row in zip(before, after):
             self.report(
                 {"INFO"},

@@ -17,7 +17,7 @@ import numpy as np
 
 from .core.errors import BolusError
 
-__all__ = ["Region", "mm_per_unit", "read_region", "read_face_labels", "apply_cuts", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "set_seams", "show_colors"]
+__all__ = ["Region", "mm_per_unit", "read_region", "subregion", "size_warning", "check_finite", "read_face_labels", "apply_cuts", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "set_seams", "show_colors"]
 
 
 def mm_per_unit(scene: bpy.types.Scene) -> float:
@@ -34,6 +34,7 @@ class Region:
     vert_ids (n,) mesh vertex index of each row of V;
     tri_poly (m,) mesh polygon index of each triangle;
     poly_ids (p,) the mesh polygons in the region;
+    tri_index (m,) index of each triangle in ``mesh.loop_triangles``.
     """
 
     obj: bpy.types.Object
@@ -45,6 +46,7 @@ class Region:
     mm_per_unit: float
     selection_only: bool
     warnings: list[str] = field(default_factory=list)
+    tri_index: np.ndarray | None = None
 
     @property
     def mesh(self) -> bpy.types.Mesh:
@@ -97,9 +99,14 @@ def read_region(context, obj: bpy.types.Object | None = None, whole: bool = Fals
     co = _get(me.vertices, "co", nv, np.float64, 3)
     M = np.array(obj.matrix_world, dtype=np.float64)
     scale = mm_per_unit(context.scene)
-    Vw = (co @ M[:3, :3].T + M[:3, 3]) * scale
     vert_ids, inv = np.unique(tri_v.ravel(), return_inverse=True)
     F = inv.reshape(-1, 3).astype(np.int64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        V = (co[vert_ids] @ M[:3, :3].T + M[:3, 3]) * scale
+    check_finite(obj, vert_ids, co[vert_ids], V)
+    units = size_warning(V, scale)
+    if units:
+        warnings.append(units)
     if not selection_only:
         loose = nv - len(vert_ids)
         if loose:
@@ -114,7 +121,7 @@ def read_region(context, obj: bpy.types.Object | None = None, whole: bool = Fals
                 warnings.append(f"{nloose} loose edges (in no face) were ignored")
     return Region(
         obj=obj,
-        V=Vw[vert_ids],
+        V=V,
         F=F,
         vert_ids=vert_ids,
         tri_poly=tri_p,
@@ -122,7 +129,86 @@ def read_region(context, obj: bpy.types.Object | None = None, whole: bool = Fals
         mm_per_unit=scale,
         selection_only=selection_only,
         warnings=warnings,
+        tri_index=np.nonzero(keep)[0],
     )
+
+
+def subregion(region: Region, tri_mask: np.ndarray) -> Region:
+    """The part of ``region`` made of the triangles in ``tri_mask`` (m,) bool (whole polygons).
+
+    Vertices are renumbered (only those used), the maps back to the mesh kept; the
+    warnings are carried over.
+    """
+    tri_mask = np.asarray(tri_mask, dtype=bool)
+    F = region.F[tri_mask]
+    used, inv = np.unique(F.ravel(), return_inverse=True)
+    tri_poly = region.tri_poly[tri_mask]
+    return Region(
+        obj=region.obj,
+        V=region.V[used],
+        F=inv.reshape(-1, 3).astype(np.int64),
+        vert_ids=region.vert_ids[used],
+        tri_poly=tri_poly,
+        poly_ids=np.unique(tri_poly),
+        mm_per_unit=region.mm_per_unit,
+        selection_only=region.selection_only,
+        warnings=list(region.warnings),
+        tri_index=None if region.tri_index is None else region.tri_index[tri_mask],
+    )
+
+
+def check_finite(obj: bpy.types.Object, vert_ids: np.ndarray, co: np.ndarray, V: np.ndarray) -> None:
+    """Refuse NaN or infinite coordinates (local ``co`` or world ``V``, both (n,3)) with the vertex index."""
+    bad = ~np.isfinite(V).all(axis=1)
+    if not bad.any():
+        return
+    k = int(np.argmax(bad))
+    first = int(vert_ids[k])
+    where = ", ".join(f"{x:g}" for x in co[k])
+    more = f" ({int(bad.sum())} vertices in all)" if bad.sum() > 1 else ""
+    if np.isfinite(co[k]).all():
+        raise BolusError(
+            f"'{obj.name}' has a transform that makes vertex {first} infinite or NaN in world space{more}: "
+            "fix the object's scale/rotation (Object > Apply > All Transforms, or Alt+S/Alt+R to clear)"
+        )
+    raise BolusError(
+        f"vertex {first} of '{obj.name}' has an invalid coordinate ({where}){more}: a bolus needs finite "
+        "coordinates; delete or fix such vertices first (e.g. re-export the surface from the planning system)"
+    )
+
+
+#: a region outside this size range (bounding-box diagonal, mm) is probably in the wrong units
+MIN_SIZE_MM = 5.0
+MAX_SIZE_MM = 3000.0
+#: (unit scale, what a file in that unit needs) offered when the size looks wrong
+_UNIT_SCALES = ((0.001, "mm"), (0.01, "cm"), (1.0, "m"))
+
+
+def size_warning(V: np.ndarray, mm_per_unit_: float) -> str | None:
+    """A warning when the region (V (n,3) mm) is larger than 3 m or smaller than 5 mm across.
+
+    The usual cause is a file in other units than the scene's (an STL in mm in a scene
+    of 1 unit = 1 m); the advice names the Unit Scale that would give a body-sized region.
+    """
+    if len(V) == 0:
+        return None
+    diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    if MIN_SIZE_MM <= diag <= MAX_SIZE_MM or diag == 0.0:
+        return None
+    units = diag / mm_per_unit_  # the size in Blender units
+    current = mm_per_unit_ / 1000.0
+    # the unit scale giving a size closest (log) to a typical treatment region, 200 mm
+    best = min(_UNIT_SCALES, key=lambda su: abs(np.log(units * su[0] * 1000.0 / 200.0)))
+    size = f"{diag / 1000.0:.4g} m" if diag > MAX_SIZE_MM else f"{diag:.3g} mm"
+    kind = "larger than 3 m" if diag > MAX_SIZE_MM else "smaller than 5 mm"
+    advice = (
+        f"if the mesh is in {best[1]} (an STL from a planning system is in mm), set Scene > Units > Unit Scale "
+        f"to {best[0]:g} (now {current:g}; then it is {units * best[0] * 1000.0:.3g} mm across), or scale the object"
+        if best[0] != current
+        else "check the units of the file and scale the object to its real size"
+    )
+    return (f"The region is {size} across (bounding-box diagonal), {kind}: the scene's units are probably wrong; "
+            f"{advice}. Sizes, areas and patterns are only right at true scale.")
 
 
 @contextlib.contextmanager
@@ -225,11 +311,40 @@ def set_seams(me: bpy.types.Mesh, seam: np.ndarray, touched: np.ndarray) -> None
     me.edges.foreach_set("use_seam", new)
 
 
-def read_face_labels(me: bpy.types.Mesh, name: str) -> np.ndarray | None:
-    """(p,) int values of the FACE attribute ``name``, or None if the mesh has none."""
+def _edit_owner(me: bpy.types.Mesh) -> bpy.types.Object | None:
+    """The object editing ``me`` in Edit Mode, if any."""
+    for ob in bpy.data.objects:
+        if ob.data is me and ob.mode == "EDIT":
+            return ob
+    return None
+
+
+def read_face_labels(data: bpy.types.Mesh | bpy.types.Object, name: str) -> np.ndarray | None:
+    """(p,) int values of the FACE attribute ``name`` of a mesh (or an object's mesh), or None.
+
+    Safe in Edit Mode, where attribute data lives in the edit-mesh (the mesh's own arrays
+    read as empty): the edit-mesh is written back first (so the result matches
+    ``me.polygons`` and `read_region`) and the values are read from it.
+    """
+    obj = data if isinstance(data, bpy.types.Object) else None
+    me = obj.data if obj is not None else data
     attr = me.attributes.get(name)
     if attr is None or attr.domain != "FACE" or attr.data_type not in {"INT", "INT8"}:
         return None
+    if me.is_editmode:
+        obj = obj if obj is not None and obj.mode == "EDIT" else _edit_owner(me)
+        if obj is not None:
+            obj.update_from_editmode()
+        import bmesh  # noqa: PLC0415 (only under Blender)
+
+        bm = bmesh.from_edit_mesh(me)
+        layer = bm.faces.layers.int.get(name)
+        if layer is not None:
+            return np.fromiter((f[layer] for f in bm.faces), dtype=np.int64, count=len(bm.faces))
+        if obj is None:  # pragma: no cover - an edit-mesh always has an object in Edit Mode
+            raise BolusError(f"internal error: cannot read '{name}' in Edit Mode")
+        with object_mode(obj):  # INT8 layers have no bmesh accessor
+            return read_face_labels(me, name)
     out = np.empty(len(me.polygons), dtype=np.int64)
     attr.data.foreach_get("value", out)
     return out
@@ -247,16 +362,23 @@ def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.n
     (`_interpolate_corners`: ``BMLoop/BMFace.copy_from_face_interp`` raise a SystemError
     in Blender 4.2); new edges along a split edge copy that edge's data (seams,
     sharpness, creases); ``label_attr`` (a FACE INT attribute) is set from
-    ``res.labels``.  Needs the region of the whole mesh (``read_region(whole=True)``).
+    ``res.labels``.  The region (whole polygons, e.g. `subregion` of the patch faces)
+    must have been read from the mesh as it is; polygons outside it are not touched.
+    The selection and hidden state follow the region (`_carry_flags`): a new face is
+    selected (hidden) iff the polygon it came from was.
     """
     import bmesh
 
     me.calc_loop_triangles()
     tri_loops = _get(me.loop_triangles, "loops", len(me.loop_triangles), np.int64, 3)
-    if len(tri_loops) != len(region.F):
-        raise BolusError("internal error: apply_cuts needs the whole mesh as its region")
+    if region.tri_index is None or len(region.tri_index) != len(region.F) or (
+        len(region.tri_index) and region.tri_index.max() >= len(tri_loops)
+    ):
+        raise BolusError("internal error: apply_cuts needs a region read from this mesh")
+    tri_loops = tri_loops[region.tri_index]
     corner_data = _corner_attributes(me)
     nv_old = len(me.vertices)
+    flags = _read_flags(me)
 
     npoly = len(me.polygons)
     tri_poly = region.tri_poly
@@ -278,6 +400,8 @@ def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.n
         bm.faces.ensure_lookup_table()
         layer = bm.faces.layers.int.get(label_attr) or bm.faces.layers.int.new(label_attr)
         verts, faces = list(bm.verts), list(bm.faces)  # index tables go stale once we add
+        old_vert = {v: i for i, v in enumerate(verts)}
+        old_edge = {e: i for i, e in enumerate(bm.edges)}
         n_in = len(region.vert_ids)
         vmap = [verts[int(i)] for i in region.vert_ids]
         support = [frozenset((int(region.vert_ids[i]),)) for i in range(n_in)]
@@ -294,6 +418,7 @@ def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.n
             faces[int(f)][layer] = int(poly_label[f])
         new_faces = np.nonzero(replaced[out_poly])[0]
         created = []
+        split_edges = []  # (new edge, the input edge it is a piece of)
         for k in new_faces.tolist():
             src_face = faces[int(out_poly[k])]
             tri = [int(i) for i in res.F[k]]
@@ -310,10 +435,14 @@ def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.n
                 e = bm.edges.get((vmap[tri[a]], vmap[tri[b]]))
                 if orig is not None and e is not None and e is not orig:
                     e.copy_from(orig)
+                    split_edges.append((e, old_edge[orig]))
         bmesh.ops.delete(bm, geom=old_faces, context="FACES_ONLY")
         for e in old_edges:
             if e.is_valid and not e.link_faces:
                 bm.edges.remove(e)
+        kept = [(f, i) for i, f in enumerate(faces) if not replaced[i]]
+        old_edge = {e: i for e, i in old_edge.items() if e.is_valid}
+        _carry_flags(bm, old_vert, old_edge, kept, created, out_poly[new_faces], split_edges, flags)
         bm.faces.index_update()
         created_index = np.array([f.index for f in created], dtype=np.int64)
         bm.to_mesh(me)
@@ -322,6 +451,63 @@ def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.n
     _interpolate_corners(me, region, res, new_faces, created_index, tri_loops, corner_data, nv_old)
     me.update()
     return read_face_labels(me, label_attr)
+
+
+def _read_flags(me: bpy.types.Mesh) -> dict:
+    """Selection and hidden state of every vertex, edge and polygon (object mode)."""
+    out = {}
+    for kind, coll in (("vert", me.vertices), ("edge", me.edges), ("face", me.polygons)):
+        for flag in ("select", "hide"):
+            out[kind, flag] = _get(coll, flag, len(coll), bool)
+    return out
+
+
+def _carry_flags(bm, old_vert: dict, old_edge: dict, kept_faces, created, created_src, split_edges, flags) -> None:
+    """Make selection and hiding follow the region through `apply_cuts`' re-meshing.
+
+    ``old_vert``/``old_edge``: {BMesh element: mesh index} of the elements there before the
+    cut; ``kept_faces`` (BMFace, mesh index) of the polygons kept; ``created`` the new
+    faces and ``created_src`` (k,) the polygon each came from; ``split_edges`` (new edge,
+    input edge index) pairs.  Kept polygons keep their state, a new face takes its
+    polygon's; an edge or vertex is selected iff it lies on a selected face or was selected
+    before (a new piece of a selected edge too), hidden iff it was or, when new, iff all its
+    faces are hidden.  (``bmesh.ops.delete`` flushes the vertex selection into the faces,
+    which scrambled it: every flag is set here explicitly.)
+    """
+    fsel, fhide = flags["face", "select"], flags["face", "hide"]
+    want = [(f, bool(fsel[i]), bool(fhide[i])) for f, i in kept_faces]
+    want += [(f, bool(fsel[p]), bool(fhide[p])) for f, p in zip(created, created_src.tolist())]
+    piece_of = dict(split_edges)
+
+    def all_faces_hidden(ele) -> bool:
+        return bool(ele.link_faces) and all(f.hide for f in ele.link_faces)
+
+    # hidden state first (a hidden element cannot be selected)
+    for f, _, hide in want:
+        if f.hide != hide:
+            f.hide = hide
+    for elems, old, hidden in ((bm.verts, old_vert, flags["vert", "hide"]), (bm.edges, old_edge, flags["edge", "hide"])):
+        for ele in elems:
+            i = old.get(ele)
+            hide = bool(hidden[i]) if i is not None else all_faces_hidden(ele)
+            if ele.hide != hide:
+                ele.hide = hide
+    # faces: deselect first (that may deselect their edges/verts), then select
+    for f, sel, hide in want:
+        if f.select and not (sel and not hide):
+            f.select = False
+    for f, sel, hide in want:
+        if sel and not hide and not f.select:
+            f.select = True
+    for elems, old, selected in ((bm.edges, {**old_edge, **piece_of}, flags["edge", "select"]),
+                                 (bm.verts, old_vert, flags["vert", "select"])):
+        for ele in elems:
+            if ele.hide:
+                continue
+            i = old.get(ele)
+            sel = any(f.select for f in ele.link_faces) or (i is not None and bool(selected[i]))
+            if ele.select != sel:
+                ele.select = sel
 
 
 _CORNER_WIDTH = {"FLOAT": 1, "FLOAT2": 2, "FLOAT_VECTOR": 3, "FLOAT_COLOR": 4, "BYTE_COLOR": 4, "INT": 1,

@@ -36,17 +36,15 @@ PATTERN_SUFFIX = "_pattern"
 class _UnfoldJob:
     """The state of one unfolding: inputs, the patch iterator and the finished patches."""
 
-    def __init__(self, context, method: str, refine: bool, gap_mm: float):
+    def __init__(self, context, method: str, refine: bool, gap_mm: float, progress=None):
+        """progress(fraction, text): the core's progress (overall fraction, "patch k/n: step")."""
         self.region = region = mesh_io.read_region(context)
         self.warnings = list(region.warnings)
         me = region.mesh
-        labels_attr = me.attributes.get(ATTR_PATCH)
-        if labels_attr is None or labels_attr.domain != "FACE":
+        poly_labels = mesh_io.read_face_labels(region.obj, ATTR_PATCH)  # safe in Edit Mode
+        if poly_labels is None:
             poly_labels = np.zeros(len(me.polygons), dtype=np.int64)
             self.warnings.append(f"no '{ATTR_PATCH}' attribute (run Segment first): unfolded as a single patch")
-        else:
-            poly_labels = np.empty(len(me.polygons), dtype=np.int64)
-            labels_attr.data.foreach_get("value", poly_labels)
         tri_labels = poly_labels[region.tri_poly]
         outside = tri_labels < 0
         if outside.all():
@@ -69,7 +67,7 @@ class _UnfoldJob:
         self.poly_labels = poly_labels
         self.gap_mm = gap_mm
         self.iter = iter_unfold_patches(region.V, region.F, self.islands, method=method.lower(),
-                                        refine_rounds=3 if refine else 0)
+                                        refine_rounds=3 if refine else 0, progress=progress)
         self.done: list = []
         self.count = len(self.island_patch)
 
@@ -263,9 +261,9 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
         return True
 
     def run(self, context):
-        job = _UnfoldJob(context, self.method, self.refine, self.gap_mm)
+        job = _UnfoldJob(context, self.method, self.refine, self.gap_mm, progress=self.progress)
         while job.step():
-            self.progress(len(job.done) / job.count)
+            self.progress(len(job.done) / job.count, f"{len(job.done)}/{job.count} islands unfolded")
         return self.finish(context, job)
 
     def finish(self, context, job: _UnfoldJob):
@@ -296,15 +294,10 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
                                      + ", ".join(row["name"] for row in bad) + "; see the advice above")
         return {"FINISHED"}
 
-    # interactive: one island per timer tick, Esc cancels
+    # interactive: one island per timer tick, Esc cancels.  BolusOperator guards both:
+    # errors become reports (abort() first for modal), no window falls back to execute.
     def invoke(self, context, event):
-        if context.window is None:
-            return self.execute(context)
-        try:
-            self._job = _UnfoldJob(context, self.method, self.refine, self.gap_mm)
-        except BolusError as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
+        self._job = _UnfoldJob(context, self.method, self.refine, self.gap_mm, progress=self.progress)
         wm = context.window_manager
         wm.progress_begin(0, 100)
         self._timer = wm.event_timer_add(0.01, window=context.window)
@@ -313,31 +306,22 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def modal(self, context, event):
-        wm = context.window_manager
         if event.type == "ESC":
-            self._end(wm)
+            self.abort(context)
             self.report({"WARNING"}, "Unfolding cancelled: nothing was created")
             return {"CANCELLED"}
         if event.type != "TIMER":
             return {"RUNNING_MODAL"}
-        try:
-            more = self._job.step()
-            wm.progress_update(int(100 * len(self._job.done) / max(self._job.count, 1)))
-            if more and len(self._job.done) < self._job.count:
-                return {"RUNNING_MODAL"}
-            self._end(wm)
-            return self.finish(context, self._job)
-        except BolusError as exc:
-            self._end(wm)
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        except Exception as exc:  # never a traceback at the user
-            traceback.print_exc()
-            self._end(wm)
-            self.report({"ERROR"}, f"Unexpected error, nothing was created ({type(exc).__name__}: {exc})")
-            return {"CANCELLED"}
+        more = self._job.step()
+        self.progress(len(self._job.done) / max(self._job.count, 1))
+        if more and len(self._job.done) < self._job.count:
+            return {"RUNNING_MODAL"}
+        self.abort(context)
+        return self.finish(context, self._job)
 
-    def _end(self, wm):
+    def abort(self, context):
+        """Remove the timer and the progress bar of the modal run (also after an error)."""
+        wm = context.window_manager
         if self._timer is not None:
             wm.event_timer_remove(self._timer)
             self._timer = None

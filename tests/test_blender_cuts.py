@@ -441,11 +441,23 @@ def test_no_patch_attribute(bpy_addon, scene):
     assert_same_state(before, state(ob))
 
 
-def test_single_patch(bpy_addon, scene):
+def test_single_patch(bpy_addon, scene, capfd):
+    """SPEC: with nothing to change, INFO, no change, no error."""
     bpy = bpy_addon
     ob = labelled_grid(bpy, lambda x, y: np.zeros_like(x, dtype=int), n=6)
     before = state(ob)
-    with pytest.raises(RuntimeError, match="there is only one patch: nothing to smooth"):
+    capfd.readouterr()
+    assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "Info: Nothing to smooth on 'skin': there is only one patch" in out and "Error" not in out
+    assert_same_state(before, state(ob))
+
+
+def test_no_face_in_a_patch(bpy_addon, scene):
+    bpy = bpy_addon
+    ob = labelled_grid(bpy, lambda x, y: np.full_like(x, -1, dtype=int), n=6)
+    before = state(ob)
+    with pytest.raises(RuntimeError, match="no face of 'skin' belongs to a patch: run Segment into Patches first"):
         bpy.ops.bolus.smooth_cuts()
     assert_same_state(before, state(ob))
 
@@ -463,8 +475,8 @@ def test_shape_keys(bpy_addon, scene):
 
 
 @pytest.mark.parametrize("case", ["strip", "corner"])
-def test_border_of_a_single_edge(bpy_addon, scene, case):
-    """Patches meeting along one edge only: nothing to fit, the operator says so."""
+def test_border_of_a_single_edge(bpy_addon, scene, case, capfd):
+    """Patches meeting along one edge only: nothing to fit, the operator says so (INFO, SPEC)."""
     bpy = bpy_addon
     if case == "strip":  # two quads side by side
         V = np.array([[0, 0, 0], [10, 0, 0], [20, 0, 0], [0, 10, 0], [10, 10, 0], [20, 10, 0]], dtype=float)
@@ -476,8 +488,12 @@ def test_border_of_a_single_edge(bpy_addon, scene, case):
         ob = make_object(bpy, V, F, scale_length=0.001)
         set_labels(ob.data, [0, 0, 0, 1, 0])
     before = state(ob)
-    with pytest.raises(RuntimeError, match=r"no border could be smoothed \(patches 0\|1: too short to fit a curve"):
-        bpy.ops.bolus.smooth_cuts()
+    capfd.readouterr()
+    assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "Info: Nothing to change on 'skin'" in out and "the mesh was not changed" in out
+    assert "Error" not in out and "Warning" not in out
+    assert out.count("Border 0|1 ") == 1 and "too short to fit a curve" in out  # the border, said once
     assert_same_state(before, state(ob))
 
 
@@ -525,10 +541,10 @@ def test_edit_mode_works_on_the_whole_mesh(bpy_addon, scene):
 
 def test_error_in_edit_mode_stays_in_edit_mode(bpy_addon, scene):
     bpy = bpy_addon
-    ob = labelled_grid(bpy, lambda x, y: np.zeros_like(x, dtype=int), n=6)
+    ob = labelled_grid(bpy, lambda x, y: np.full_like(x, -1, dtype=int), n=6)
     before = state(ob)
     enter_edit_mode_with_faces(bpy, ob, np.ones(len(ob.data.polygons), dtype=bool))
-    with pytest.raises(RuntimeError, match="there is only one patch"):
+    with pytest.raises(RuntimeError, match="no face of 'skin' belongs to a patch"):
         bpy.ops.bolus.smooth_cuts()
     assert ob.mode == "EDIT"
     bpy.ops.object.mode_set(mode="OBJECT")
@@ -553,3 +569,194 @@ def test_panel_shows_the_cut_table(bpy_addon, scene):
     (row,) = cut_table(ob)
     assert "Border" in labels and "0|1" in labels and row["method"] in labels
     assert f"{row['turning_before']:.2f}→{row['turning_after']:.2f}" in labels
+
+
+# ------------------------------------------------- selection, region, reports (issue 9)
+def bumpy_region_grid(bpy, n=40):
+    """A 100 mm grid with a bump; returns (object, mask of the quads within 30 mm of the centre)."""
+    V, F = quad_grid(n)
+    V[:, 2] = 20.0 * np.exp(-((V[:, 0] - 50.0) ** 2 + (V[:, 1] - 50.0) ** 2) / 600.0)
+    ob = make_object(bpy, V, F, scale_length=0.001)
+    c = V[F].mean(axis=1)
+    return ob, np.hypot(c[:, 0] - 50.0, c[:, 1] - 50.0) < 30.0
+
+
+def set_edit_selection(me, select, hide=None) -> None:
+    """In Edit Mode: exactly the faces ``select`` selected (with their edges and vertices), ``hide`` hidden."""
+    import bmesh  # noqa: PLC0415 (only under Blender)
+
+    bm = bmesh.from_edit_mesh(me)
+    for seq in (bm.faces, bm.edges, bm.verts):
+        for ele in seq:
+            ele.hide_set(False)
+            ele.select_set(False)
+    bm.faces.ensure_lookup_table()
+    if hide is not None:
+        for i in np.nonzero(hide)[0]:
+            bm.faces[int(i)].hide_set(True)
+    for i in np.nonzero(select)[0]:
+        bm.faces[int(i)].select_set(True)
+    bmesh.update_edit_mesh(me)
+
+
+def edit_flags(me):
+    """(face select, face patch label, vert select, edge select, face/vert/edge sets) from the edit-mesh."""
+    import bmesh  # noqa: PLC0415 (only under Blender)
+
+    bm = bmesh.from_edit_mesh(me)
+    layer = bm.faces.layers.int.get("bolus_patch")
+    fsel = np.array([f.select for f in bm.faces])
+    lab = np.array([f[layer] for f in bm.faces])
+    in_sel_face_v = np.zeros(len(bm.verts), dtype=bool)
+    in_sel_face_e = np.zeros(len(bm.edges), dtype=bool)
+    bm.verts.index_update()
+    bm.edges.index_update()
+    for f in bm.faces:
+        if f.select:
+            in_sel_face_v[[v.index for v in f.verts]] = True
+            in_sel_face_e[[e.index for e in f.edges]] = True
+    vsel = np.array([v.select for v in bm.verts])
+    esel = np.array([e.select for e in bm.edges])
+    return fsel, lab, vsel, esel, in_sel_face_v, in_sel_face_e
+
+
+def test_selection_follows_the_region_in_edit_mode(bpy_addon, scene):
+    """Issue 9 item 2: the Edit Mode region, segmented and cut, is still exactly the selection."""
+    bpy = bpy_addon
+    ob, region = bumpy_region_grid(bpy)
+    me = ob.data
+    enter_edit_mode_with_faces(bpy, ob, region)
+    set_edit_selection(me, region)  # the helper leaves every edge (so every vertex) selected
+    assert bpy.ops.bolus.segment(patches=3) == {"FINISHED"}
+    fsel, lab, vsel, esel, in_v, in_e = edit_flags(me)
+    assert np.array_equal(fsel, lab >= 0) and fsel.sum() == region.sum()  # the region before
+    assert np.array_equal(vsel, in_v)
+    nf = len(fsel)
+    assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
+    assert ob.mode == "EDIT"
+    fsel, lab, vsel, esel, in_v, in_e = edit_flags(me)
+    assert len(fsel) > nf  # the cut added faces
+    assert (lab >= 0).sum() > region.sum()
+    np.testing.assert_array_equal(fsel, lab >= 0)  # selected faces = the patch faces, nothing else
+    np.testing.assert_array_equal(vsel, in_v)  # their vertices, no others
+    assert esel[in_e].all()  # their edges; any other selected edge joins two selected vertices
+    ev = np.array([[v.index for v in e.verts] for e in __import__("bmesh").from_edit_mesh(me).edges])
+    assert vsel[ev[esel]].all()
+    # and the next step works on that region: a second cut finds nothing to change
+    assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
+
+
+@pytest.mark.parametrize("mode", ["OBJECT", "EDIT"])
+def test_selection_and_hiding_follow_each_polygon(bpy_addon, scene, mode):
+    """Every face after the cut lies in one old quad: it is selected (hidden) iff that quad was."""
+    bpy = bpy_addon
+    ob = labelled_grid(bpy, line_rule)
+    me = ob.data
+    rng = np.random.default_rng(3)
+    pick = rng.random(N * N)
+    sel, hide = pick < 0.3, pick > 0.8  # disjoint: a hidden face cannot be selected
+    bpy.context.tool_settings.mesh_select_mode = (False, False, True)
+    bpy.ops.object.mode_set(mode="EDIT")
+    set_edit_selection(me, sel, hide)
+    if mode == "OBJECT":
+        bpy.ops.object.mode_set(mode="OBJECT")
+        assert np.array_equal([p.hide for p in me.polygons], hide) and np.array_equal([p.select for p in me.polygons], sel)
+    n0 = len(me.polygons)
+    assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
+    assert ob.mode == mode
+    if mode == "EDIT":
+        bpy.ops.object.mode_set(mode="OBJECT")
+    assert len(me.polygons) > n0
+    V = coords(me)
+    c = np.array([V[list(p)].mean(axis=0) for p in polygons(me)])
+    quad = np.floor(c[:, 0] / H).astype(int) * N + np.floor(c[:, 1] / H).astype(int)  # quad_grid's order
+    got_sel = np.array([p.select for p in me.polygons])
+    got_hide = np.array([p.hide for p in me.polygons])
+    np.testing.assert_array_equal(got_hide, hide[quad])
+    np.testing.assert_array_equal(got_sel, sel[quad])
+    in_sel = np.zeros(len(me.vertices), dtype=bool)
+    for p in me.polygons:
+        if p.select:
+            in_sel[list(p.vertices)] = True
+    np.testing.assert_array_equal(np.array([v.select for v in me.vertices]), in_sel)
+    in_shown = np.zeros(len(me.vertices), dtype=bool)
+    for p in me.polygons:
+        if not p.hide:
+            in_shown[list(p.vertices)] = True
+    vhide = np.array([v.hide for v in me.vertices])
+    assert not (vhide & in_shown).any()  # a vertex of a visible face is visible
+    new = np.arange(len(me.vertices)) >= (N + 1) ** 2
+    assert (vhide[new] == ~in_shown[new]).all()  # a new vertex is hidden iff all its faces are
+
+
+def far_defect(kind: str):
+    """Two triangles 200 mm away from the 100 mm grid: a bow-tie (one shared vertex) or a fin
+    (three triangles on one edge), as (vertices, faces) to append."""
+    if kind == "bowtie":
+        V = np.array([[300, 0, 0], [310, 0, 0], [305, 8, 0], [300, 16, 0], [310, 16, 0]], dtype=float)
+        return V, [(0, 1, 2), (2, 4, 3)]
+    V = np.array([[300, 0, 0], [310, 0, 0], [305, 8, 0], [305, -8, 0], [305, 0, 8]], dtype=float)
+    return V, [(0, 1, 2), (1, 0, 3), (0, 1, 4)]
+
+
+@pytest.mark.parametrize("kind", ["bowtie", "fin"])
+def test_checks_apply_to_the_patch_faces_only(bpy_addon, scene, kind):
+    """Issue 9 item 3: a non-manifold spot 200 mm from the patches does not block the cut ..."""
+    bpy = bpy_addon
+    V, F = quad_grid(12)
+    W, G = far_defect(kind)
+    c = V[F].mean(axis=1)
+    labels = list(line_rule(c[:, 0], c[:, 1])) + [-1] * len(G)
+    ob = make_object(bpy, np.vstack([V, W]), [tuple(f) for f in F] + [tuple(np.add(g, len(V))) for g in G],
+                     scale_length=0.001)
+    set_labels(ob.data, labels)
+    n0 = len(ob.data.vertices)
+    far = coords(ob.data)[len(V):].copy()
+    assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
+    me = ob.data
+    assert len(me.vertices) > n0
+    np.testing.assert_array_equal(coords(me)[len(V):n0], far)  # the far part untouched
+    lab = labels_of(me)
+    assert (lab == -1).sum() == len(G)
+    # ... but the same spot inside a patch still refuses
+    ob2 = make_object(bpy, np.vstack([V, W]), [tuple(f) for f in F] + [tuple(np.add(g, len(V))) for g in G],
+                      name="inside", scale_length=0.001)
+    set_labels(ob2.data, list(line_rule(c[:, 0], c[:, 1])) + [0] * len(G))
+    with pytest.raises(RuntimeError, match="non-manifold"):
+        bpy.ops.bolus.smooth_cuts()
+
+
+def test_second_run_reports_nothing_to_change(bpy_addon, scene, capfd):
+    """SPEC: with nothing to change smooth_cuts reports INFO, changes nothing, raises no error."""
+    bpy = bpy_addon
+    ob = labelled_grid(bpy, line_rule)
+    assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
+    before = state(ob)
+    capfd.readouterr()
+    assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert "Info: Nothing to change on 'skin'" in out
+    assert "Error" not in out and "Warning" not in out
+    assert out.count("Border 0|1 ") == 1
+    assert_same_state(before, state(ob))
+
+
+def test_each_border_reported_once(bpy_addon, scene, capfd):
+    """Issue 9 item 7: a border left as it is was printed twice (WARNING and INFO)."""
+    bpy = bpy_addon
+
+    def rule(x, y):
+        lab = line_rule(x, y)
+        lab[(x < 4.0) & (y < 4.0)] = 2  # the corner quad: a border of two edges, left as it is
+        return lab
+
+    ob = labelled_grid(bpy, rule)
+    capfd.readouterr()
+    assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
+    out = capfd.readouterr().out
+    rows = cut_table(ob)
+    assert {r["method"] == "unchanged" for r in rows} == {True, False}  # a mix of both
+    lines = [ln for ln in out.splitlines() if ": Border " in ln]
+    assert len(lines) == len(rows)
+    for r in rows:
+        assert sum(f"Border {r['a']}|{r['b']} (" in ln for ln in lines) == 1
