@@ -569,3 +569,222 @@ def test_undo_after_segment_restores_mesh(bpy_addon, scene):
     assert bpy.ops.ed.redo() == {"FINISHED"}
     ob = bpy.data.objects[name]
     assert "bolus_patch" in ob.data.attributes and "bolus_patch_table" in ob
+
+
+# ------------------------------------------- every operator, every mode, both entries (issue 9)
+def bump_grid(bpy, n=16, size=100.0):
+    """A (n x n)-quad grid of `size` mm with a bump, 1 unit = 1 mm; returns (object, quad centres)."""
+    xs = np.linspace(0.0, size, n + 1)
+    X, Y = np.meshgrid(xs, xs, indexing="ij")
+    Z = 0.2 * size * np.exp(-((X - size / 2) ** 2 + (Y - size / 2) ** 2) / (0.06 * size * size))
+    V = np.c_[X.ravel(), Y.ravel(), Z.ravel()]
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    F = np.stack([idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()], axis=1)
+    ob = make_object(bpy, V, F, scale_length=0.001)
+    return ob, V[F].mean(axis=1)
+
+
+def edit_face_selection(me) -> np.ndarray:
+    import bmesh  # noqa: PLC0415 (only under Blender)
+
+    return np.array([f.select for f in bmesh.from_edit_mesh(me).faces])
+
+
+def edit_face_labels(me, name) -> np.ndarray:
+    import bmesh  # noqa: PLC0415 (only under Blender)
+
+    bm = bmesh.from_edit_mesh(me)
+    layer = bm.faces.layers.int.get(name)
+    return np.array([f[layer] for f in bm.faces])
+
+
+def test_unfold_after_segment_in_edit_mode(bpy_addon, scene):
+    """Issue 9 item 1, the repro: grid -> Edit Mode -> select all -> segment(3) -> unfold (was a TypeError)."""
+    bpy = bpy_addon
+    ob, _ = bump_grid(bpy, n=30)
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_all(action="SELECT")
+    assert bpy.ops.bolus.segment(patches=3) == {"FINISHED"}
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert ob.mode == "EDIT"
+    assert edit_face_selection(ob.data).all()
+    pat = bpy.data.objects["skin_pattern"]
+    src = attr_array(pat.data, "bolus_source_face", np.int64)
+    assert sorted(src.tolist()) == list(range(900))
+
+
+@pytest.mark.parametrize("call", ["EXEC_DEFAULT", "INVOKE_DEFAULT"])
+@pytest.mark.parametrize("selection", ["region", "none"])
+def test_every_operator_in_edit_mode(bpy_addon, scene, tmp_path, capfd, selection, call):
+    """Every operator works in Edit Mode, from scripts (exec) and as from the panel (invoke),
+    keeps Edit Mode and the selection, and works on the selected faces (or, with none, the mesh)."""
+    bpy = bpy_addon
+    ob, c = bump_grid(bpy)
+    me = ob.data
+    npoly = len(me.polygons)
+    region = np.hypot(c[:, 0] - 50.0, c[:, 1] - 50.0) < 35.0 if selection == "region" else np.zeros(npoly, bool)
+    enter_edit_mode_with_faces(bpy, ob, region)
+    inside = region if selection == "region" else np.ones(npoly, dtype=bool)
+    steps = [
+        ("saliency_preview", {"smoothing_mm": 0.0}),
+        ("segment", {"patches": 3}),
+        ("smooth_cuts", {}),
+        ("unfold", {}),
+        ("export_pattern", {"filepath": str(tmp_path / "pattern.svg")}),
+        ("print_segment", {"parts": 2}),
+        ("orient_parts", {}),
+        ("export_parts", {"directory": str(tmp_path)}),
+    ]
+    for name, kw in steps:
+        capfd.readouterr()
+        assert getattr(bpy.ops.bolus, name)(call, **kw) == {"FINISHED"}, name
+        out = capfd.readouterr().out
+        assert "Error" not in out and "Traceback" not in out, (name, out)
+        assert ob.mode == "EDIT", name
+        assert bpy.context.view_layer.objects.active is ob, name
+        if name == "segment":
+            lab = edit_face_labels(me, "bolus_patch")
+            np.testing.assert_array_equal(lab >= 0, inside)
+        if name == "smooth_cuts":  # the mesh changed: the region is the patch faces, still selected
+            inside = edit_face_labels(me, "bolus_patch") >= 0
+            region = inside if selection == "region" else np.zeros(len(inside), dtype=bool)
+        np.testing.assert_array_equal(edit_face_selection(me), region, err_msg=name)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    part = attr_array(me, "bolus_print_part", np.int64)
+    np.testing.assert_array_equal(part >= 0, inside)  # SPEC: -1 outside an Edit Mode region
+    np.testing.assert_array_equal(attr_array(me, "bolus_patch", np.int64) >= 0, inside)
+    src = attr_array(bpy.data.objects["skin_pattern"].data, "bolus_source_face", np.int64)
+    np.testing.assert_array_equal(np.sort(src), np.nonzero(inside)[0])
+    assert (tmp_path / "pattern.svg").stat().st_size > 0
+    assert sorted(p.name for p in tmp_path.glob("*.stl")) == ["skin_part_0.stl", "skin_part_1.stl"]
+
+
+def test_no_faces_selected_in_edit_mode_warns(bpy_addon, scene, capfd):
+    bpy = bpy_addon
+    ob, _ = bump_grid(bpy)
+    enter_edit_mode_with_faces(bpy, ob, np.zeros(len(ob.data.polygons), dtype=bool))
+    assert bpy.ops.bolus.segment(patches=2) == {"FINISHED"}
+    capfd.readouterr()
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert "No faces selected in Edit Mode: using the whole mesh" in capfd.readouterr().out
+
+
+def guarded_operator_class():
+    """A BolusOperator (not registered: the guard is plain Python) whose every entry fails."""
+    from bolus.bolus_addon.operators import BolusOperator  # noqa: PLC0415 (the extension package)
+
+    class Fake(BolusOperator):
+        bl_idname = "BOLUS_OT_fake"
+        fail = TypeError
+
+        def __init__(self):
+            self.reports, self.aborted = [], 0
+
+        def report(self, kind, msg):
+            self.reports.append((set(kind), msg))
+
+        def run(self, context):
+            raise self.fail("boom in run")
+
+        def invoke(self, context, event):
+            raise self.fail("boom in invoke")
+
+        def modal(self, context, event):
+            raise self.fail("boom in modal")
+
+        def abort(self, context):
+            self.aborted += 1
+
+    return Fake
+
+
+class _WM:
+    def progress_begin(self, lo, hi):
+        pass
+
+    def progress_update(self, value):
+        pass
+
+    def progress_end(self):
+        pass
+
+
+@pytest.mark.parametrize("fail", ["TypeError", "BolusError"])
+def test_invoke_and_modal_are_guarded(bpy_addon, fail):
+    """Issue 9 item 1: invoke (the panel) caught only BolusError: a raw traceback reached the user."""
+    from types import SimpleNamespace
+
+    from bolus.bolus_addon.core.errors import BolusError  # noqa: PLC0415
+
+    Fake = guarded_operator_class()
+    Fake.fail = TypeError if fail == "TypeError" else BolusError
+    expect = "Unexpected error, nothing was changed (TypeError: boom in {})" if fail == "TypeError" else "boom in {}"
+    with_window = SimpleNamespace(window=object(), window_manager=_WM())
+    op = Fake()
+    assert op.invoke(with_window, None) == {"CANCELLED"}
+    assert op.reports == [({"ERROR"}, expect.format("invoke"))]
+    op = Fake()
+    assert op.modal(with_window, None) == {"CANCELLED"}
+    assert op.reports == [({"ERROR"}, expect.format("modal"))] and op.aborted == 1
+    op = Fake()  # no window (background, bpy module): invoke runs execute
+    assert op.invoke(SimpleNamespace(window=None, window_manager=_WM()), None) == {"CANCELLED"}
+    assert op.reports == [({"ERROR"}, expect.format("run"))]
+
+
+def test_every_registered_invoke_and_modal_is_guarded(bpy_addon):
+    bpy = bpy_addon
+    names = [n for n in dir(bpy.types) if n.startswith("BOLUS_OT_")]
+    assert {"BOLUS_OT_unfold", "BOLUS_OT_export_pattern", "BOLUS_OT_export_parts"} <= set(names)
+    for n in names:
+        cls = getattr(bpy.types, n)
+        for fn in ("invoke", "modal"):
+            if fn in cls.__dict__:
+                assert getattr(cls.__dict__[fn], "_bolus_guarded", False), f"{n}.{fn} is not guarded"
+
+
+def test_invoke_without_window_reports_unexpected_errors(bpy_addon, scene, monkeypatch):
+    bpy = bpy_addon
+    ob, _ = bump_grid(bpy)
+    assert bpy.ops.bolus.segment(patches=2) == {"FINISHED"}
+    mesh_io = __import__("sys").modules["bolus.bolus_addon.mesh_io"]
+
+    def broken(*a, **k):
+        raise TypeError("foreach_get(..) sequence length mismatch")
+
+    monkeypatch.setattr(mesh_io, "read_face_labels", broken)
+    for call in ("INVOKE_DEFAULT", "EXEC_DEFAULT"):
+        with pytest.raises(RuntimeError, match=r"Unexpected error, nothing was changed \(TypeError: foreach_get"):
+            bpy.ops.bolus.unfold(call)
+    assert "skin_pattern" not in bpy.data.objects
+
+
+# ------------------------------------------------------------- progress on stdout
+def test_progress_lines_every_two_seconds(bpy_addon, monkeypatch, capfd):
+    from bolus.bolus_addon import operators  # noqa: PLC0415
+
+    assert bpy_addon.app.background
+    clock = [100.0]
+    monkeypatch.setattr(operators.time, "monotonic", lambda: clock[0])
+    op = guarded_operator_class()()
+    op.bl_idname = "BOLUS_OT_unfold"
+    op._wm = _WM()
+    capfd.readouterr()
+    op.progress(0.0, "patch 1/5: initial unfolding")  # the first at once
+    clock[0] += 1.0
+    op.progress(0.2, "patch 1/5: relaxing springs")  # too soon
+    clock[0] += 1.5
+    op.progress(0.43, "patch 2/5: relaxing springs")
+    clock[0] += 0.5
+    op.progress(0.5, "patch 2/5: overlap correction round 3/16")
+    lines = capfd.readouterr().out.splitlines()
+    assert lines == ["bolus.unfold: patch 1/5: initial unfolding 0 %", "bolus.unfold: patch 2/5: relaxing springs 43 %"]
+
+
+def test_unfold_prints_the_core_progress(bpy_addon, scene, capfd):
+    bpy = bpy_addon
+    bump_grid(bpy)
+    assert bpy.ops.bolus.segment(patches=2) == {"FINISHED"}
+    capfd.readouterr()
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    lines = [ln for ln in capfd.readouterr().out.splitlines() if ln.startswith("bolus.unfold: ")]
+    assert lines and re.fullmatch(r"bolus\.unfold: patch 1/2: .+ \d+ %", lines[0]), lines
