@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -328,3 +329,102 @@ def test_error_in_edit_mode_stays_in_edit_mode(bpy_addon, scene):
     np.testing.assert_array_equal(co0, co1)
     np.testing.assert_array_equal(seams0, seams1)
     assert "bolus_patch" not in names1 and "bolus_flattenability" in ours1
+
+
+# ------------------------------------------- every operator that reads a region (issue 9)
+REGION_OPS = {"saliency_preview": {"smoothing_mm": 0.0}, "segment": {"patches": 2}, "smooth_cuts": {}, "unfold": {},
+              "print_segment": {"parts": 2}, "orient_parts": {}}
+
+
+def set_co(ob, co) -> None:
+    ob.data.vertices.foreach_set("co", np.asarray(co, dtype=np.float64).ravel())
+    ob.data.update()
+
+
+def two_patches(ob) -> None:
+    """bolus_patch 0 / 1 on the two halves of a grid (what smooth_cuts needs)."""
+    me = ob.data
+    c = np.array([p.center[0] for p in me.polygons])
+    attr = me.attributes.new("bolus_patch", "INT", "FACE")
+    attr.data.foreach_set("value", (c > np.median(c)).astype(np.int32))
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize("op", list(REGION_OPS))
+def test_non_finite_coordinates_are_refused(bpy_addon, scene, op, value):
+    """Issue 9 item 9: NaN coordinates were accepted by saliency_preview."""
+    bpy = bpy_addon
+    V, F = grid(8, 8, h=10.0)
+    ob = make_object(bpy, V, F, scale_length=0.001)
+    two_patches(ob)
+    V[17, 1] = value
+    set_co(ob, V)
+    before = snapshot(ob)
+    with pytest.raises(RuntimeError, match=r"vertex 17 of 'skin' has an invalid coordinate \(10, -?(nan|inf), "):
+        getattr(bpy.ops.bolus, op)(**REGION_OPS[op])
+    assert_unchanged(before, snapshot(ob))
+
+
+def test_non_finite_transform_is_refused(bpy_addon, scene):
+    bpy = bpy_addon
+    ob = make_object(bpy, *grid(4, 4, h=10.0), scale_length=0.001)
+    ob.rotation_euler = (math.nan, 0.0, 0.0)  # (an infinite scale is clamped by Blender)
+    bpy.context.view_layer.update()
+    with pytest.raises(RuntimeError, match="'skin' has a transform that makes vertex .* infinite or NaN"):
+        bpy.ops.bolus.saliency_preview(smoothing_mm=0.0)
+
+
+def test_non_finite_vertex_outside_the_edit_mode_region_is_ignored(bpy_addon, scene):
+    """Only the region counts: a bad vertex in faces that are not selected does not block."""
+    bpy = bpy_addon
+    V, F = grid(6, 6, h=10.0)
+    ob = make_object(bpy, V, F, scale_length=0.001)
+    V[48, 2] = math.nan  # the far corner (6, 6): only in the last quad
+    set_co(ob, V)
+    sel = np.zeros(len(F), dtype=bool)
+    sel[:12] = True  # the first two rows of quads
+    from conftest import enter_edit_mode_with_faces  # noqa: PLC0415
+
+    enter_edit_mode_with_faces(bpy, ob, sel)
+    assert bpy.ops.bolus.saliency_preview(smoothing_mm=0.0) == {"FINISHED"}
+    bpy.ops.mesh.select_all(action="SELECT")
+    with pytest.raises(RuntimeError, match="vertex 48 of 'skin' has an invalid coordinate"):
+        bpy.ops.bolus.saliency_preview(smoothing_mm=0.0)
+    assert ob.mode == "EDIT"
+
+
+@pytest.mark.parametrize("op", list(REGION_OPS))
+def test_mm_mesh_in_a_metre_scene_warns(bpy_addon, scene, capfd, op):
+    """Issue 9 item 6: a 200 mm region imported from a mm file into a 1 m scene (it is 283 m across)."""
+    bpy = bpy_addon
+    ob = make_object(bpy, *grid(8, 8, h=25.0))  # scale_length 1.0: 1 unit = 1 m
+    two_patches(ob)
+    capfd.readouterr()
+    assert getattr(bpy.ops.bolus, op)(**REGION_OPS[op]) == {"FINISHED"}
+    out = capfd.readouterr().out
+    warning = re.search(r"Warning: The region is ([\d.]+) m across \(bounding-box diagonal\), larger than 3 m: .*"
+                        r"set Scene > Units > Unit Scale to 0\.001 \(now 1; then it is ([\d.]+) mm across\), "
+                        r"or scale the object", out)
+    assert warning, out
+    assert float(warning.group(1)) == pytest.approx(200.0 * math.sqrt(2.0), rel=0.02)
+    assert float(warning.group(2)) == pytest.approx(200.0 * math.sqrt(2.0), rel=0.02)
+    assert out.count("The region is ") == 1
+
+
+def test_metre_mesh_in_a_millimetre_scene_warns(bpy_addon, scene, capfd):
+    bpy = bpy_addon
+    make_object(bpy, *grid(8, 8, h=0.025), scale_length=0.001)  # 0.2 units = 0.2 mm
+    capfd.readouterr()
+    assert bpy.ops.bolus.segment(patches=2) == {"FINISHED"}
+    out = capfd.readouterr().out
+    assert re.search(r"Warning: The region is 0\.28\d? mm across .*smaller than 5 mm: .*Unit Scale to 1 \(now 0\.001;", out), out
+
+
+@pytest.mark.parametrize("h, scale_length", [(25.0, 0.001), (0.5, 0.01), (0.25, 1.0), (0.5, 0.001)])
+def test_plausible_sizes_do_not_warn(bpy_addon, scene, capfd, h, scale_length):
+    """A region 5 mm .. 3 m across is left alone (here 283 mm, 57 mm, 2.8 m, 5.7 mm)."""
+    bpy = bpy_addon
+    make_object(bpy, *grid(8, 8, h=h), scale_length=scale_length)
+    capfd.readouterr()
+    assert bpy.ops.bolus.saliency_preview(smoothing_mm=0.0) == {"FINISHED"}
+    assert "The region is" not in capfd.readouterr().out
