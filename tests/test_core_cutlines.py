@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import shared_mesh
 from meshgen import grid, ring_surface, spherical_cap
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -16,6 +17,8 @@ from bolus_addon.core.cutlines import (
     turning_per_mm,
 )
 from bolus_addon.core.errors import BolusError
+from bolus_addon.core.objfile import load_obj
+from bolus_addon.core.spectral import segment
 from bolus_addon.core.topology import MeshTopology
 
 
@@ -337,12 +340,18 @@ def test_refuses_wrong_label_shape():
         smooth_cuts(V, F, np.zeros(3, dtype=int))
 
 
-def test_refuses_when_every_border_is_too_short():
+def test_every_border_too_short_changes_nothing():
+    """SPEC: with nothing to change (every border too short) no error, nothing changed, the reason in the note."""
     V = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0]], dtype=float)
     F = np.array([[0, 1, 2], [0, 2, 3]])
     labels = np.array([0, 1])  # the border is one edge
-    with pytest.raises(BolusError, match="too short"):
-        smooth_cuts(V, F, labels)
+    res = smooth_cuts(V, F, labels)
+    assert not res.changed and res.new_vertex_count == 0 and not res.split.any()
+    np.testing.assert_array_equal(res.V, V)
+    np.testing.assert_array_equal(res.F, F)
+    np.testing.assert_array_equal(res.labels, labels)
+    (rep,) = res.borders
+    assert rep.method == "unchanged" and "too short" in rep.note
 
 
 def test_refuses_patches_without_a_common_border():
@@ -355,10 +364,109 @@ def test_refuses_patches_without_a_common_border():
         smooth_cuts(V, F, labels)
 
 
+# ------------------------------------------------------------------ idempotent (issue 9, item 7)
+def assert_second_run_changes_nothing(V, F, labels):
+    """Run smooth_cuts on (V, F, labels) and again on its result: the second run must change nothing."""
+    first = smooth_cuts(V, F, labels)
+    assert first.changed and first.new_vertex_count > 0
+    second = smooth_cuts(first.V, first.F, first.labels)
+    assert second.new_vertex_count == 0 and len(second.V) == len(first.V)
+    np.testing.assert_array_equal(second.V, first.V)
+    np.testing.assert_array_equal(second.F, first.F)
+    np.testing.assert_array_equal(second.labels, first.labels)
+    assert not second.changed and not second.split.any()
+    assert second.borders and all(r.method == "unchanged" for r in second.borders)
+    assert all(r.turning_after == r.turning_before for r in second.borders)
+    return first, second
+
+
+def nose_region(patches, radius=45.0):
+    """The demo's treatment area (scripts/demo.py) segmented with the core: the faces of the ICT
+    face within radius mm of the nose tip that face forward, one connected piece; labels -1
+    elsewhere, as bolus_patch is outside an Edit Mode region."""
+    V, F, poly = load_obj(shared_mesh("ict_face_narrow.obj"), 10.0)  # cm -> mm, +Z forward
+    tip = V[np.argmax(V[:, 2])]
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    npoly = poly.max() + 1
+    pn = np.zeros((npoly, 3))
+    np.add.at(pn, poly, n)
+    pc = np.zeros((npoly, 3))
+    np.add.at(pc, poly, centroids(V, F))
+    pc /= np.bincount(poly, minlength=npoly)[:, None]
+    sel = (np.linalg.norm(pc - tip, axis=1) < radius) & (pn[:, 2] > 0.1 * np.linalg.norm(pn, axis=1))
+    keep = np.nonzero(sel[poly])[0]
+    _, comp = MeshTopology(V, F[keep]).face_components()
+    near_tip = keep[np.argmin(np.linalg.norm(centroids(V, F[keep]) - tip, axis=1))]
+    region = keep[comp == comp[np.searchsorted(keep, near_tip)]]
+    ids, inv = np.unique(F[region], return_inverse=True)
+    seg = segment(V[ids], inv.reshape(-1, 3), patches=patches, eta=5.0, smoothing_mm=3.0, rng=0, face_groups=poly[region])
+    labels = np.full(len(F), -1)
+    labels[region] = seg.face_labels
+    return V, F, labels
+
+
 def test_second_run_says_the_borders_are_already_smooth():
     V, F, h = sheet()
     c = centroids(V, F)
     labels = (c[:, 0] > 50 + 0.3 * (c[:, 1] - 50)).astype(int)
+    _, second = assert_second_run_changes_nothing(V, F, labels)
+    (rep,) = second.borders
+    assert rep.note.startswith("already smooth")
+
+
+@pytest.mark.parametrize("case", ["parabola", "ellipse", "three patches", "tube ring", "dome"])
+def test_second_run_changes_nothing_on_synthetic_meshes(case):
+    if case == "tube ring":
+        prof = np.stack([np.full(31, 40.0), np.linspace(0, 120, 31)], 1)
+        V, F, _ = ring_surface(prof, na=48, pole=False)
+        c = centroids(V, F)
+        labels = (c[:, 2] > 60 + 0.3 * c[:, 0]).astype(int)
+    elif case == "dome":
+        V, F = spherical_cap(50, 80, 4)
+        c = centroids(V, F)
+        labels = (np.linalg.norm(c[:, :2] - [10, 5], axis=1) < 20).astype(int)
+    elif case == "three patches":
+        V, F = grid(30, 30, size=100.0, jitter=0.2)
+        c = centroids(V, F)
+        labels = np.where(c[:, 0] + 3 * np.sin(c[:, 1] / 7) < 40, 0, np.where(c[:, 1] + 2 * np.cos(c[:, 0] / 5) < 50, 1, 2))
+    else:
+        V, F, _ = sheet()
+        c = centroids(V, F)
+        if case == "parabola":
+            labels = (c[:, 0] - 50 - 0.01 * (c[:, 1] - 50) ** 2 > 0).astype(int)
+        else:
+            labels = (np.linalg.norm(c[:, :2] - [45, 55], axis=1) < 25).astype(int)
+    first, second = assert_second_run_changes_nothing(V, F, labels)
+    check_invariants(V, F, labels, first)
+
+
+def test_border_already_on_mesh_edges_is_left_alone():
+    """A straight border along a row of mesh edges is already a smooth cut: no error, no change."""
+    V, F, h = sheet()
+    c = centroids(V, F)
+    labels = (c[:, 0] > 50.0).astype(int)
     res = smooth_cuts(V, F, labels)
-    with pytest.raises(BolusError, match="already smooth cut lines"):
-        smooth_cuts(res.V, res.F, res.labels)
+    assert not res.changed and res.new_vertex_count == 0
+    np.testing.assert_array_equal(res.F, F)
+    np.testing.assert_array_equal(res.labels, labels)
+    (rep,) = res.borders
+    assert rep.method == "unchanged" and rep.note.startswith("already smooth")
+
+
+@pytest.mark.parametrize("patches", [4, 5])
+def test_second_run_changes_nothing_on_the_demo_nose(patches):
+    """Issue 9's repro: the demo's nose region; a second run re-cut 3 of 9 (4 patches) and 9 of 9
+    (5 patches) borders and added 34 and 98 vertices."""
+    V, F, labels = nose_region(patches)
+    assert len(np.unique(labels[labels >= 0])) == patches
+    first, _ = assert_second_run_changes_nothing(V, F, labels)
+    out = first.labels < 0
+    assert first.face_unchanged[out].all() and out.sum() == (labels < 0).sum()
+
+
+def test_second_run_changes_nothing_on_a_segmented_real_face():
+    V, F, poly = load_obj(shared_mesh("ict_face_narrow.obj"), 10.0)  # cm -> mm
+    seg = segment(V, F, patches=5, eta=5.0, smoothing_mm=3.0, rng=0, face_groups=poly)
+    first, _ = assert_second_run_changes_nothing(V, F, seg.face_labels)
+    for r in first.borders:
+        assert r.turning_after < r.turning_before, r

@@ -103,8 +103,14 @@ MAX_FOURIER = 3
 PARAM_CORRECTIONS = 4  #: closed fits: parameter-correction rounds (nodes re-parameterised by their nearest curve point)
 MBO_SIGMA_EDGES = (2.0, 3.5, 6.0)  #: diffusion lengths tried, in mean border edges
 MBO_ITERATIONS = 2
-NOT_SMOOTHER = "the cut would not be smoother than the border"
+NOT_SMOOTHER = "the cut would not be measurably smoother than the border"
+NEGLIGIBLE = "the cut would move the border less than a tenth of an edge"
+ALREADY_SMOOTH = "already smooth"
 SMOOTH_ENOUGH = 0.3  #: a smoothed path is accepted at once when it turns <= 30 % of the border
+MIN_GAIN = 0.25  #: a cut must turn at most (1 - MIN_GAIN) of the border to be worth making
+MIN_SHIFT = 0.1  #: a cut moving the border less than this fraction of its mean edge is the same border
+ON_CURVE = 0.1  #: border vertices within this fraction of the mean edge of their fitted curve: already that curve
+MAX_PASSES = 4  #: passes over all borders until one changes nothing (a later cut moves the ends of earlier ones)
 
 
 # ---------------------------------------------------------------- borders
@@ -568,67 +574,69 @@ def _split_faces(st: _State, bf: np.ndarray, phi: np.ndarray, ce: np.ndarray, t:
     """Re-triangulate the band faces along the cut (Figure 4-2 (b)) and relabel them."""
     n = len(st.V)
     F, V = st.F, st.V
-    # new vertices, one per crossing edge
-    key = {(int(u), int(v)): n + k for k, (u, v) in enumerate(ce.tolist())}
-    new_v = np.empty((len(ce), 3))
-    new_src = np.empty((len(ce), 3), dtype=np.int64)
-    new_w = np.empty((len(ce), 3))
-    new_parent = np.empty(len(ce), dtype=np.int64)
-    # parent triangle of each crossing edge: any face of it
-    e_index = {}
-    for f in bf.tolist():
-        tri = F[f]
-        for k in range(3):
-            u, v = int(tri[k]), int(tri[(k + 1) % 3])
-            kk = key.get((min(u, v), max(u, v)))
-            if kk is not None and kk not in e_index:
-                e_index[kk] = f
-    for kk, f in e_index.items():
-        j = kk - n
-        u, v = ce[j]
-        par = st.parent[f]
-        wu, wv = _weights_on(st, np.array([u, v]), par)
-        w = (1.0 - t[j]) * wu + t[j] * wv
-        new_src[j] = st.F0[par]
-        new_parent[j] = par
-        new_w[j] = w
-        new_v[j] = w @ st.V0[st.F0[par]]
+    # new vertices, one per crossing edge (vertex n + j on edge ce[j])
+    ce_key = np.minimum(ce[:, 0], ce[:, 1]) * n + np.maximum(ce[:, 0], ce[:, 1])
+    order = np.argsort(ce_key)
+    Fb = F[bf]
+    u, v = Fb, np.roll(Fb, -1, axis=1)  # side k of face i: Fb[i, k] -> Fb[i, k+1]
+    side_key = np.minimum(u, v) * n + np.maximum(u, v)
+    pos = np.clip(np.searchsorted(ce_key[order], side_key), 0, max(len(ce) - 1, 0))
+    hit = (ce_key[order][pos] == side_key) if len(ce) else np.zeros(side_key.shape, dtype=bool)
+    xs = np.where(hit, n + order[pos], -1) if len(ce) else np.full(side_key.shape, -1)  # (len(bf), 3) new vertex per side
+    # parent triangle of each crossing edge: the first band face that has it
+    fi, _ = np.nonzero(hit)
+    jj = xs[hit] - n
+    first = np.unique(jj, return_index=True)[1]
+    e_face = np.empty(len(ce), dtype=np.int64)
+    e_face[jj[first]] = bf[fi[first]]
+    new_parent = st.parent[e_face]
+    corners = st.F0[new_parent]  # (k,3)
+    new_w = np.zeros((len(ce), 3))
+    for end_, wt in ((0, 1.0 - t), (1, t)):
+        src, w = st.vsrc[ce[:, end_]], st.vw[ce[:, end_]]  # (k,3) each
+        for c in range(3):
+            new_w[:, c] += wt * np.where(src == corners[:, c : c + 1], w, 0.0).sum(axis=1)
+    new_src = corners
+    new_v = np.einsum("kc,kcd->kd", new_w, st.V0[corners])
     phi_all = np.r_[phi, np.zeros(len(ce))]
     Vall = np.vstack([V, new_v])
+    ncross = (xs >= 0).sum(axis=1)
     keep = np.ones(len(F), dtype=bool)
-    out_F, out_parent, out_from = [], [], []
-    for f in bf.tolist():
-        tri = [int(x) for x in F[f]]
-        xs = []
-        for k in range(3):
-            u, v = tri[k], tri[(k + 1) % 3]
-            xs.append(key.get((min(u, v), max(u, v))))
-        ncross = sum(x is not None for x in xs)
-        if ncross == 0:
-            continue
-        keep[f] = False
-        if ncross == 1:
-            k = next(i for i in range(3) if xs[i] is not None)
-            p, q, r, x = tri[k], tri[(k + 1) % 3], tri[(k + 2) % 3], xs[k]
-            pieces = [(p, x, r), (x, q, r)]
-        else:
-            # lone vertex p: both of its edges cross (edges k-1 and k)
-            k = next(i for i in range(3) if xs[i] is not None and xs[(i - 1) % 3] is not None)
-            p, q, r = tri[k], tri[(k + 1) % 3], tri[(k + 2) % 3]
-            x, y = xs[k], xs[(k - 1) % 3]  # x on p-q, y on r-p
-            opt1 = [(x, q, r), (x, r, y)]
-            opt2 = [(x, q, y), (q, r, y)]
-            m1 = _min_angles(Vall[np.array(opt1)]).min()
-            m2 = _min_angles(Vall[np.array(opt2)]).min()
-            pieces = [(p, x, y)] + (opt1 if m1 >= m2 else opt2)
-        out_F += pieces
-        out_parent += [st.parent[f]] * len(pieces)
-        out_from += [f] * len(pieces)
-    new_F = np.array(out_F, dtype=np.int64).reshape(-1, 3)
+    keep[bf[ncross > 0]] = False
+    rows = np.arange(len(bf))
+    # one crossed side k: (p, x, r), (x, q, r)
+    one = np.nonzero(ncross == 1)[0]
+    k1 = np.argmax(xs[one] >= 0, axis=1)
+    p1, q1, r1 = Fb[one, k1], Fb[one, (k1 + 1) % 3], Fb[one, (k1 + 2) % 3]
+    x1 = xs[one, k1]
+    pieces1 = np.stack([np.stack([p1, x1, r1], 1), np.stack([x1, q1, r1], 1)], 1)  # (c1,2,3)
+    # two crossed sides k-1 and k around the lone vertex p = Fb[k]
+    two = np.nonzero(ncross == 2)[0]
+    both = (xs[two] >= 0) & (np.roll(xs[two], 1, axis=1) >= 0)  # side k and side k-1
+    k2 = np.argmax(both, axis=1)
+    p2, q2, r2 = Fb[two, k2], Fb[two, (k2 + 1) % 3], Fb[two, (k2 + 2) % 3]
+    x2, y2 = xs[two, k2], xs[two, (k2 - 1) % 3]  # x on p-q, y on r-p
+    opt1 = np.stack([np.stack([x2, q2, r2], 1), np.stack([x2, r2, y2], 1)], 1)
+    opt2 = np.stack([np.stack([x2, q2, y2], 1), np.stack([q2, r2, y2], 1)], 1)
+    m1 = _min_angles(Vall[opt1.reshape(-1, 3)]).reshape(-1, 2).min(axis=1) if len(two) else np.zeros(0)
+    m2 = _min_angles(Vall[opt2.reshape(-1, 3)]).reshape(-1, 2).min(axis=1) if len(two) else np.zeros(0)
+    rest = np.where((m1 >= m2)[:, None, None], opt1, opt2)
+    pieces2 = np.concatenate([np.stack([p2, x2, y2], 1)[:, None, :], rest], axis=1)  # (c2,3,3)
+    # in the order of the band faces, as the faces they replace
+    count = np.zeros(len(bf), dtype=np.int64)
+    count[one], count[two] = 2, 3
+    start_ = np.r_[0, np.cumsum(count)[:-1]]
+    new_F = np.empty((int(count.sum()), 3), dtype=np.int64)
+    for i in range(2):
+        new_F[start_[one] + i] = pieces1[:, i]
+    for i in range(3):
+        new_F[start_[two] + i] = pieces2[:, i]
+    out_from = np.repeat(bf[rows], count)
+    out_parent = st.parent[out_from]
     F2 = np.vstack([F[keep], new_F])
-    parent2 = np.r_[st.parent[keep], np.array(out_parent, dtype=np.int64)]
+    parent2 = np.r_[st.parent[keep], out_parent]
     unchanged2 = np.r_[st.unchanged[keep], np.zeros(len(new_F), dtype=bool)]
-    from_face = np.r_[np.nonzero(keep)[0], np.array(out_from, dtype=np.int64)]
+    from_face = np.r_[np.nonzero(keep)[0], out_from]
     # labels: band faces by side of the cut
     band2 = np.zeros(len(F), dtype=bool)
     band2[bf] = True
@@ -657,7 +665,7 @@ def _split_faces(st: _State, bf: np.ndarray, phi: np.ndarray, ce: np.ndarray, t:
         np.r_[st.vparent, new_parent],
     )
     pieces = Vall[new_F] if len(new_F) else np.zeros((0, 3, 3))
-    return new_st, pieces, np.array(out_from, dtype=np.int64), from_face
+    return new_st, pieces, out_from, from_face
 
 
 # ------------------------------------------------------------ per border
@@ -674,24 +682,43 @@ def _band(st: _State, topo: MeshTopology, border: Border, all_borders: list[Bord
     pts, own = np.vstack(samples), np.concatenate(owner)
     me = next(i for i, o in enumerate(all_borders) if o is border)
     tree = cKDTree(pts)
-    in_u = (st.labels == border.a) | (st.labels == border.b)
-    dist, idx = tree.query(topo.centroids)
-    return in_u & (dist <= R) & (own[idx] == me)
+    C = topo.centroids
+    box = np.all((C >= pts.min(axis=0) - R) & (C <= pts.max(axis=0) + R), axis=1)
+    faces = np.nonzero(box & ((st.labels == border.a) | (st.labels == border.b)))[0]
+    dist, idx = tree.query(C[faces], distance_upper_bound=R * (1 + 1e-12) + 1e-300)
+    near = np.isfinite(dist) & (dist <= R)
+    out = np.zeros(len(st.F), dtype=bool)
+    out[faces[near]] = own[idx[near]] == me
+    return out
 
 
-def _check(st: _State, phi: np.ndarray, a: int, b: int, band_faces_new: np.ndarray) -> np.ndarray:
-    """Cut edges of the new a|b border; raises _CutFailed if the result breaks a rule."""
-    topo = MeshTopology(st.V, st.F)
-    for lab in (a, b):
-        mask = st.labels == lab
+def _check(st: _State, phi: np.ndarray, a: int, b: int, band_faces_new: np.ndarray) -> tuple[np.ndarray, MeshTopology]:
+    """(cut edges of the new a|b border, topology of the faces of a and b and their neighbours);
+    raises _CutFailed if the result breaks a rule.
+
+    Only patches a and b and the faces touching them are looked at (the vertex normals of
+    their vertices are those of the whole mesh), so a cut costs the size of the pair.
+    """
+    ab = (st.labels == a) | (st.labels == b)
+    verts = np.zeros(len(st.V), dtype=bool)
+    verts[st.F[ab]] = True
+    sub = np.nonzero(verts[st.F].any(axis=1))[0]
+    topo = MeshTopology(st.V, st.F[sub])
+    labels = st.labels[sub]
+    band_faces_new = band_faces_new[sub]
+    side = np.where(labels == a, 1, np.where(labels == b, 2, 0))
+    comp = None
+    for lab, code in ((a, 1), (b, 2)):
+        mask = side == code
         if not mask.any():
             raise _CutFailed(f"patch {lab} would vanish")
-        ncomp, comp = topo.face_components(np.where(mask, 1, 0))
+        if comp is None:
+            _, comp = topo.face_components(side)
         if len(np.unique(comp[mask])) > 1:
             raise _CutFailed(f"patch {lab} would fall apart")
     P = topo.face_adjacency_pairs
     E = topo.face_adjacency_edges
-    la, lb = st.labels[P[:, 0]], st.labels[P[:, 1]]
+    la, lb = labels[P[:, 0]], labels[P[:, 1]]
     ab = ((la == a) & (lb == b)) | ((la == b) & (lb == a))
     on_cut = np.r_[phi, np.zeros(len(st.V) - len(phi))] == 0
     edges = topo.edges[E[ab]]
@@ -701,7 +728,7 @@ def _check(st: _State, phi: np.ndarray, a: int, b: int, band_faces_new: np.ndarr
     cut = on_cut[edges[:, 0]] & on_cut[edges[:, 1]]
     if (touches_band & ~cut).any():
         raise _CutFailed("a jagged piece of the border would remain")
-    return edges[touches_band]
+    return edges[touches_band], topo
 
 
 def _edge_samples(E: np.ndarray, V: np.ndarray, k: int = 9) -> np.ndarray:
@@ -790,6 +817,9 @@ def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: 
                     R_ = Q - c
                     return R_ @ e2 - np.polyval(coef, R_ @ e1)
 
+            if dev <= ON_CURVE * h:  # a cut we made before: cutting again would only add vertices
+                report.note = f"{ALREADY_SMOOTH} (its vertices lie on a {name} within {dev:.2g} mm)"
+                return st, report
             if dev > limit:
                 reasons.append(f"the fitted {name} strays {dev:.1f} mm from the border")
             else:
@@ -812,6 +842,10 @@ def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: 
                 planes.append(ns / np.linalg.norm(ns))
         for nrm in planes:
             dev = float(np.abs((P - c) @ nrm).max())
+            across = dn > 0 and abs(float(nrm @ d)) / dn < 0.5  # the plane crosses the surface
+            if dev <= ON_CURVE * h and across:
+                report.note = f"{ALREADY_SMOOTH} (its vertices lie on a plane section within {dev:.2g} mm)"
+                return st, report
             if dev <= limit:
                 rms_p = float(np.sqrt(np.mean(((P - c) @ nrm) ** 2)))
                 attempts.append(("plane section", lambda Q, c=c, nrm=nrm: (Q - c) @ nrm, True,
@@ -829,17 +863,20 @@ def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: 
             band = _band(st, topo, border, all_borders, R * grow)
             try:
                 new_st, phi, from_face = _cut_band(st, topo, band, a, b, phi_fn, linear, snap)
-                cut_edges = _check(new_st, phi, a, b, band[from_face])
+                cut_edges, new_topo = _check(new_st, phi, a, b, band[from_face])
             except _CutFailed as exc:
                 reasons.append(f"{name}: {exc}")
                 continue
-            turn1, len1 = turning_per_mm(new_st.V, cut_edges, MeshTopology(new_st.V, new_st.F).vertex_normals)
+            turn1, len1 = turning_per_mm(new_st.V, cut_edges, new_topo.vertex_normals)
             shift = _hausdorff(border.edges, st.V, cut_edges, new_st.V)
             if shift > limit:
                 reasons.append(f"{name}: the cut would move {shift:.1f} mm from the border")
                 continue
-            if turn1 >= turn0:
+            if turn1 >= turn0 or turn1 > (1.0 - MIN_GAIN) * turn0:
                 reasons.append(f"{name}: {NOT_SMOOTHER}")
+                continue
+            if shift < MIN_SHIFT * h:
+                reasons.append(f"{name}: {NEGLIGIBLE}")
                 continue
             result = (new_st, name, len1, turn1, shift, rms)
             if turn1 > SMOOTH_ENOUGH * turn0:
@@ -853,8 +890,8 @@ def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: 
     if fallback is not None:
         return _accept(report, fallback, reasons)
     report.note = "left as it is: " + "; ".join(dict.fromkeys(reasons))
-    if reasons and all(r.endswith(NOT_SMOOTHER) or r.endswith("would vanish") for r in reasons):
-        report.note = "left as it is: already as smooth as any cut we can fit"
+    if reasons and all(r.endswith((NOT_SMOOTHER, NEGLIGIBLE, "would vanish")) for r in reasons):
+        report.note = f"{ALREADY_SMOOTH} (no cut we can fit is measurably smoother)"
     return st, report
 
 
@@ -877,9 +914,12 @@ def smooth_cuts(V, F, labels, snap: float = SNAP, progress=None) -> SmoothCutRes
 
     V (n,3) mm, F (m,3) a manifold triangle mesh, labels (m,) int patch of each face
     (negative: in no patch; those faces are never split or relabelled).
-    Returns a `SmoothCutResult`; the input arrays are not modified.
-    Raises BolusError when there is nothing to smooth (fewer than two patches, no
-    border, or only borders too short to fit).
+    Returns a `SmoothCutResult`; the input arrays are not modified.  With nothing to
+    change (every border already smooth, too short or impossible to smooth) the result
+    is the input, every border 'unchanged' with its reason in ``note``, and
+    ``result.changed`` is False; calling it again on its own result changes nothing.
+    Raises BolusError when there is nothing to smooth at all (fewer than two patches,
+    no common border, a non-manifold mesh).
     """
     V, F = as_mesh_arrays(V, F)
     labels = np.asarray(labels, dtype=np.int64).copy()
@@ -906,34 +946,129 @@ def smooth_cuts(V, F, labels, snap: float = SNAP, progress=None) -> SmoothCutRes
         np.repeat(np.arange(n)[:, None], 3, axis=1), eye, np.full(n, -1, dtype=np.int64),
     )
     report = progress or (lambda f, t: None)
-    reports = []
+    # Passes over every border until one changes nothing: a cut of a|c relabels faces near
+    # the a|b|c junction and so moves the end of an a|b cut made before it; the next pass
+    # smooths such ends.  The last pass changes nothing, so neither does a second call
+    # on the result (idempotent: every border is then 'unchanged', "already smooth").
+    tracks: list[_Track] = []
+    memo: dict = {"seen": {}, "version": {}}
+    for pass_no in range(MAX_PASSES):
+        lo, hi = (0.0, 0.75) if pass_no == 0 else (0.75 + 0.2 * (1 - 0.5 ** (pass_no - 1)), 0.75 + 0.2 * (1 - 0.5**pass_no))
+        st, changed = _one_pass(st, snap, tracks, pass_no, memo, lambda f, t: report(lo + (hi - lo) * f, t))
+        if not changed:
+            break
+    _final_measures(st, tracks)
+    reports = [tr.report for tr in tracks]
+    split = np.ones(m, dtype=bool)
+    split[st.parent[st.unchanged]] = False
+    report(1.0, "done")
+    return SmoothCutResult(st.V, st.F, st.labels, st.parent, st.unchanged, st.vsrc, st.vw, st.vparent, split, reports)
+
+
+@dataclass
+class _Track:
+    """One border of the input, followed through the passes (one report row)."""
+
+    report: BorderReport
+    edges: np.ndarray  #: (k,2) its edges in the input (input vertices never move)
+    samples: np.ndarray  #: (s,3) points along them
+    changed: bool = False
+
+
+def _nearest_track(tracks: list[_Track], border: Border, V: np.ndarray) -> _Track | None:
+    """The input border of the same pair that this border of a later pass lies nearest to."""
+    best, best_d = None, np.inf
+    pts = _edge_samples(border.edges, V, 3)
+    for tr in tracks:
+        if (tr.report.a, tr.report.b) != (border.a, border.b):
+            continue
+        dist = float(np.median(cKDTree(tr.samples).query(pts)[0]))
+        if dist < best_d:
+            best, best_d = tr, dist
+    return best
+
+
+def _pair_borders(st: _State, a: int, b: int) -> list[Border]:
+    """`border_components` of the pair a|b only (computed on the faces of a and b)."""
+    ab = (st.labels == a) | (st.labels == b)
+    return border_components(MeshTopology(st.V, st.F[ab]), st.labels[ab])
+
+
+def _one_pass(st: _State, snap: float, tracks: list[_Track], pass_no: int, memo: dict, report) -> tuple[_State, bool]:
+    """Smooth every border of the current mesh once; returns (state, whether a cut was made).
+
+    The first pass creates one `_Track` per border; later passes update the track each
+    border descends from.  A border left unchanged before is not tried again while its
+    two patches have not changed since (memo: 'seen' (a, b, edges) -> patch versions then,
+    'version' patch -> number of cuts that changed it): what `_smooth_border` decides
+    depends on those two patches only, so it would decide the same again.
+    """
+    seen, version = memo["seen"], memo["version"]
+    borders = border_components(MeshTopology(st.V, st.F), st.labels)
     pairs = sorted({(bd.a, bd.b) for bd in borders})
-    done = 0
-    total = len(borders)
+    done, total, changed = 0, len(borders), False
+    last = None
     for a, b in pairs:
         # borders of this pair on the current mesh (earlier cuts may have moved junctions)
-        fresh = border_components(MeshTopology(st.V, st.F), st.labels)
-        for bd in [x for x in fresh if (x.a, x.b) == (a, b)]:
-            report(done / max(total, 1), f"cut between patches {a} and {b}")
-            if reports and reports[-1].method != "unchanged" and (reports[-1].a, reports[-1].b) == (a, b):
-                fresh = border_components(MeshTopology(st.V, st.F), st.labels)  # the last cut moved things
+        fresh = _pair_borders(st, a, b)
+        for bd in list(fresh):
+            report(done / max(total, 1), f"cut between patches {a} and {b}" + (f" (pass {pass_no + 1})" if pass_no else ""))
+            if last is not None and last.method != "unchanged" and (last.a, last.b) == (a, b):
+                fresh = _pair_borders(st, a, b)  # the last cut moved things
             # the same border on the current mesh (its edges are unchanged: other pairs' cuts
             # never touch an a|b edge)
             match = [x for x in fresh if (x.a, x.b) == (a, b) and len(np.intersect1d(_edge_keys(x.edges), _edge_keys(bd.edges)))]
             if not match:
                 continue
+            key = (a, b, np.sort(_edge_keys(match[0].edges)).tobytes())
+            now = (version.get(a, 0), version.get(b, 0))
+            if seen.get(key) == now:
+                done += 1
+                continue
+            if pass_no == 0:
+                tr = _Track(None, match[0].edges.copy(), _edge_samples(match[0].edges, st.V, 5))
+            else:
+                tr = _nearest_track(tracks, match[0], st.V)
             st, rep = _smooth_border(st, match[0], fresh, snap)
-            reports.append(rep)
+            last = rep
             done += 1
-    if not any(r.method != "unchanged" for r in reports):
-        if all(r.note.endswith("already as smooth as any cut we can fit") for r in reports):
-            raise BolusError("the patch borders are already smooth cut lines: nothing to change")
-        why = "; ".join(f"patches {r.a}|{r.b}: {r.note}" for r in reports)
-        raise BolusError(f"no border could be smoothed ({why})")
-    split = np.ones(m, dtype=bool)
-    split[st.parent[st.unchanged]] = False
-    report(1.0, "done")
-    return SmoothCutResult(st.V, st.F, st.labels, st.parent, st.unchanged, st.vsrc, st.vw, st.vparent, split, reports)
+            cut = rep.method != "unchanged"
+            changed |= cut
+            if cut:
+                version[a], version[b] = now[0] + 1, now[1] + 1
+            else:
+                seen[key] = now
+            if pass_no == 0:
+                tr.report, tr.changed = rep, cut
+                tracks.append(tr)
+            elif cut and tr is not None:
+                if tr.changed and tr.report.method != rep.method:
+                    rep.note = "; ".join(x for x in (tr.report.note, f"{tr.report.method}, then {rep.method} where later cuts had moved its ends") if x)
+                elif tr.changed:
+                    rep.note = tr.report.note
+                rep.turning_before, rep.length_before_mm = tr.report.turning_before, tr.report.length_before_mm
+                rep.border_vertices = tr.report.border_vertices
+                tr.report, tr.changed = rep, True
+    return st, changed
+
+
+def _final_measures(st: _State, tracks: list[_Track]) -> None:
+    """Turning, length and shift of each track's border on the final mesh (the whole border, ends included)."""
+    topo = MeshTopology(st.V, st.F)
+    owned: dict[int, list[np.ndarray]] = {}
+    for bd in border_components(topo, st.labels):
+        tr = _nearest_track(tracks, bd, st.V)
+        if tr is not None:
+            owned.setdefault(id(tr), []).append(bd.edges)
+    for tr in tracks:
+        if id(tr) not in owned:
+            continue
+        E = np.vstack(owned[id(tr)])
+        if len(E) == len(tr.edges) and np.array_equal(np.sort(_edge_keys(E)), np.sort(_edge_keys(tr.edges))):
+            continue  # untouched
+        rep = tr.report
+        rep.turning_after, rep.length_after_mm = turning_per_mm(st.V, E, topo.vertex_normals)
+        rep.max_shift_mm = _hausdorff(tr.edges, st.V, E, st.V)
 
 
 def _edge_keys(E: np.ndarray) -> np.ndarray:
