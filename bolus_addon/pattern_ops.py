@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import traceback
 
 import bpy
 import numpy as np
