@@ -1,6 +1,13 @@
-"""The extension as Blender builds, validates and installs it (manifest, paths_exclude_pattern)."""
+"""The extension as Blender builds, validates and installs it (manifest, paths_exclude_pattern, wheels).
+
+Each install runs in a separate Python (a separate Blender) with a throw-away user folder
+(BLENDER_USER_RESOURCES), as a user's "Install from Disk" does, and then runs the add-on's
+operators through the *installed* copy.  Besides the running Blender, the zip is installed
+into bpy 5.2.3 (Python 3.13, numpy 2) from .venv52 when that venv exists.
+"""
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -12,6 +19,9 @@ import pytest
 pytestmark = [pytest.mark.blender, pytest.mark.smoke]
 
 ROOT = Path(__file__).resolve().parents[1]
+PY52 = ROOT / ".venv52" / "bin" / "python"
+sys.path.insert(0, str(ROOT / "scripts"))
+import build_extension  # noqa: E402
 
 
 def blender_ext_cli() -> Path:
@@ -20,6 +30,11 @@ def blender_ext_cli() -> Path:
     if not cli.exists():
         pytest.skip(f"Blender's extension builder not found at {cli}")
     return cli
+
+
+def running_bpy_version() -> str:
+    bpy = pytest.importorskip("bpy")
+    return ".".join(str(x) for x in bpy.app.version[:3])
 
 
 @pytest.fixture(scope="module")
@@ -39,28 +54,211 @@ def built_zip(tmp_path_factory):
 def test_zip_holds_the_addon_and_no_dev_files(built_zip):
     names = set(zipfile.ZipFile(built_zip).namelist())
     for must in ("blender_manifest.toml", "__init__.py", "LICENSE", "bolus_addon/__init__.py",
-                 "bolus_addon/operators.py", "bolus_addon/pattern_ops.py", "bolus_addon/core/unfold.py",
-                 "bolus_addon/core/spectral.py"):
+                 "bolus_addon/operators.py", "bolus_addon/pattern_ops.py", "bolus_addon/compat.py",
+                 "bolus_addon/core/unfold.py", "bolus_addon/core/spectral.py", "bolus_addon/core/geometry2d.py"):
         assert must in names, f"{must} missing from the extension zip"
     # every module of the package is there (4.2's `paths` would have dropped folder contents)
     for py in (ROOT / "bolus_addon").rglob("*.py"):
         assert py.relative_to(ROOT).as_posix() in names
     for banned in ("tests/", "bench/", "scripts/", "assets/", ".ci/", "docs/", ".venv", "Makefile",
-                   "requirements.txt", "pyproject.toml", "__pycache__"):
+                   "requirements", "pyproject.toml", "__pycache__"):
         assert not any(n.startswith(banned) or f"/{banned}" in n for n in names), f"{banned} leaked into the zip"
 
 
-def test_blender_installs_and_enables_the_zip(built_zip, tmp_path):
-    """Install from Disk, as a user does, into a throw-away user folder (a separate Blender)."""
-    code = (
-        "import bpy, sys\n"
-        f"r = bpy.ops.extensions.package_install_files(filepath={str(built_zip)!r}, repo='user_default', "
-        "enable_on_install=True)\n"
-        "print('RESULT', r, hasattr(bpy.types.Scene, 'bolus'), 'bl_ext.user_default.bolus' in bpy.context.preferences.addons)\n"
-        "bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3)\n"
-        "print('SEGMENT', bpy.ops.bolus.segment(patches=2))\n"
-    )
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path))
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
-    assert "RESULT {'FINISHED'} True True" in out.stdout, out.stdout + out.stderr
-    assert "SEGMENT {'FINISHED'}" in out.stdout, out.stdout + out.stderr
+# Runs in the other Blender: install the zip, enable it, segment and unfold a bent sheet
+# (a piece of a cylinder of radius 0.2 m, 100 mm wide, in a 1 m-unit scene) through the
+# installed add-on, and print what a user would check.
+INSTALL_AND_RUN = r"""
+import json, sys
+import bpy
+import numpy as np
+
+ZIP, USER = sys.argv[1], sys.argv[2]
+out = {"bpy": bpy.app.version_string, "python": "%d.%d" % sys.version_info[:2], "numpy": np.__version__}
+r = bpy.ops.extensions.package_install_files(filepath=ZIP, repo="user_default", enable_on_install=True)
+out["install"] = sorted(r)
+out["enabled"] = "bl_ext.user_default.bolus" in bpy.context.preferences.addons
+out["scene_prop"] = hasattr(bpy.types.Scene, "bolus")
+mod = sys.modules.get("bl_ext.user_default.bolus.bolus_addon.operators")
+out["module_file"] = getattr(mod, "__file__", "")
+
+n = 11
+x, y = np.meshgrid(np.linspace(-0.05, 0.05, n), np.linspace(-0.05, 0.05, n))
+R = 0.2
+V = np.stack([R * np.sin(x.ravel() / R), y.ravel(), R * (1 - np.cos(x.ravel() / R))], 1)
+ids = np.arange(n * n).reshape(n, n)
+Q = np.stack([ids[:-1, :-1], ids[:-1, 1:], ids[1:, 1:], ids[1:, :-1]], -1).reshape(-1, 4)
+me = bpy.data.meshes.new("sheet")
+me.from_pydata(V.tolist(), [], Q.tolist())
+me.update()
+ob = bpy.data.objects.new("sheet", me)
+bpy.context.scene.collection.objects.link(ob)
+bpy.context.view_layer.objects.active = ob
+ob.select_set(True)
+
+out["segment"] = sorted(bpy.ops.bolus.segment(patches=2))
+a = ob.data.attributes["bolus_patch"]
+lab = np.zeros(len(ob.data.polygons), dtype=np.int32)
+a.data.foreach_get("value", lab)
+out["patch_labels"] = sorted(set(lab.tolist()))
+
+out["unfold"] = sorted(bpy.ops.bolus.unfold())
+pat = bpy.data.objects.get("sheet_pattern")
+out["pattern"] = pat is not None
+if pat is not None:
+    pm = pat.data
+    P = np.zeros(len(pm.vertices) * 3)
+    pm.vertices.foreach_get("co", P)
+    P = P.reshape(-1, 3)
+    src = np.zeros(len(pm.polygons), dtype=np.int32)
+    pm.attributes["bolus_source_face"].data.foreach_get("value", src)
+    out["pattern_max_abs_z"] = float(np.abs(P[:, 2]).max())
+    out["pattern_faces_cover_source"] = sorted(src.tolist()) == list(range(len(me.polygons)))
+    # edge-length error EL (SPEC) of the pattern against the sheet
+    L = L0 = 0.0
+    for k, poly in enumerate(pm.polygons):
+        pv = list(poly.vertices)
+        sv = list(me.polygons[int(src[k])].vertices)
+        for i in range(len(pv)):
+            l1 = np.linalg.norm(P[pv[i]] - P[pv[(i + 1) % len(pv)]])
+            l0 = np.linalg.norm(V[sv[i]] - V[sv[(i + 1) % len(sv)]])
+            L += abs(l1 - l0)
+            L0 += l0
+    out["EL"] = L / L0
+print("RESULT " + json.dumps(out))
+"""
+
+
+def install_and_run(python: Path | str, zip_path: Path, user: Path) -> dict:
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(user))
+    env.pop("PYTHONPATH", None)
+    p = subprocess.run([str(python), "-c", INSTALL_AND_RUN, str(zip_path), str(user)], capture_output=True,
+                       text=True, timeout=300, env=env, cwd=str(user))  # cwd: the work tree is not importable
+    lines = [ln for ln in p.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert p.returncode == 0 and lines, p.stdout[-3000:] + p.stderr[-3000:]
+    return json.loads(lines[-1][len("RESULT "):])
+
+
+def check_installed_run(res: dict, user: Path) -> None:
+    assert res["install"] == ["FINISHED"] and res["enabled"] and res["scene_prop"], res
+    # the operators came from the installed copy in the throw-away user folder
+    assert Path(res["module_file"]).resolve().is_relative_to(user.resolve()), res["module_file"]
+    assert res["segment"] == ["FINISHED"] and res["patch_labels"] == [0, 1], res
+    assert res["unfold"] == ["FINISHED"] and res["pattern"], res
+    assert res["pattern_max_abs_z"] <= 1e-6 and res["pattern_faces_cover_source"], res
+    assert res["EL"] < 0.02, res  # a piece of a cylinder unfolds almost isometrically
+
+
+def test_blender_installs_the_zip_and_runs_segment_and_unfold(built_zip, tmp_path):
+    """Install from Disk into the running Blender's version, then segment and unfold."""
+    res = install_and_run(sys.executable, built_zip, tmp_path)
+    assert res["bpy"].startswith(running_bpy_version()), res
+    check_installed_run(res, tmp_path)
+
+
+def test_blender_5_2_installs_the_zip_and_runs_segment_and_unfold(built_zip, tmp_path):
+    """The same in bpy 5.2.3 (Python 3.13, numpy 2), the Blender most people download today."""
+    if not PY52.exists():
+        pytest.skip(".venv52 (bpy 5.2.3) does not exist: `make .venv52/.installed` needs a Python 3.13")
+    if Path(sys.prefix).resolve() == PY52.parent.parent.resolve():
+        pytest.skip("this run is bpy 5.2.3 itself: test_blender_installs_the_zip_and_runs_segment_and_unfold")
+    res = install_and_run(PY52, built_zip, tmp_path)
+    assert res["bpy"].startswith("5.2") and res["python"] == "3.13" and res["numpy"].startswith("2."), res
+    check_installed_run(res, tmp_path)
+
+
+# ---------------------------------------------------------------- wheels for two Pythons
+
+def test_bundled_pins_are_ordered_for_blender_4_2():
+    """cp311 pins above the cp313 ones (see build_extension): checked, and refused otherwise."""
+    pins = build_extension.check_pins()
+    assert set(pins) == {"scipy", "scikit-learn"}
+    for v in pins.values():
+        assert set(v) == {"cp311", "cp313"}
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(build_extension, "pinned", lambda name, req="requirements.txt": f"{name}==1.9.1")
+        with pytest.raises(SystemExit, match="Blender 4.2.0 installs"):
+            build_extension.check_pins()
+
+
+def test_staged_manifest_lists_platforms_and_wheels_before_the_tables():
+    import tomllib
+
+    text = build_extension.staged_manifest((ROOT / "blender_manifest.toml").read_text(), ["linux-x64", "macos-x64"],
+                                           ["a-1.0-cp311-cp311-any.whl", "a-1.0-cp313-cp313-any.whl"])
+    m = tomllib.loads(text)
+    assert m["platforms"] == ["linux-x64", "macos-x64"]
+    assert m["wheels"] == ["./wheels/a-1.0-cp311-cp311-any.whl", "./wheels/a-1.0-cp313-cp313-any.whl"]
+    assert m["id"] == "bolus" and "permissions" in m and "build" in m
+    assert set(build_extension.PLATFORMS) == {"linux-x64", "macos-arm64", "macos-x64", "windows-x64"}
+
+
+def probe_wheel(folder: Path, dist: str, version: str, tag: str) -> str:
+    """A minimal wheel ``<dist>-<version>-<tag>-<tag>-any.whl`` whose module says its tag."""
+    name = f"{dist}-{version}-{tag}-{tag}-any.whl"
+    info = f"{dist}-{version}.dist-info"
+    files = {f"{dist}/__init__.py": f"TAG = {tag!r}\nVERSION = {version!r}\n",
+             f"{info}/METADATA": f"Metadata-Version: 2.1\nName: {dist}\nVersion: {version}\n",
+             f"{info}/WHEEL": f"Wheel-Version: 1.0\nGenerator: bolus-test\nRoot-Is-Purelib: false\nTag: {tag}-{tag}-any\n"}
+    record = "".join(f"{k},,\n" for k in files) + f"{info}/RECORD,,\n"
+    with zipfile.ZipFile(folder / name, "w") as z:
+        for k, text in files.items():
+            z.writestr(k, text)
+        z.writestr(f"{info}/RECORD", record)
+    return name
+
+
+PROBE = r"""
+import importlib, json, sys
+import bpy
+r = bpy.ops.extensions.package_install_files(filepath=sys.argv[1], repo="user_default", enable_on_install=True)
+out = {"install": sorted(r), "python": "cp3%d" % sys.version_info[1]}
+for dist in sys.argv[2:]:
+    m = importlib.import_module(dist)
+    out[dist] = [m.TAG, m.VERSION]
+print("RESULT " + json.dumps(out))
+"""
+
+
+@pytest.mark.parametrize("python", ["running", "bpy-5.2.3"])
+def test_blender_installs_the_wheels_of_its_own_python(tmp_path, python):
+    """An extension carrying cp311 and cp313 wheels versioned like our scipy / scikit-learn pins:
+    the running Blender (4.2.0 too, which does not look at the Python tag) installs its own."""
+    exe = sys.executable
+    if python == "bpy-5.2.3":
+        if not PY52.exists():
+            pytest.skip(".venv52 (bpy 5.2.3) does not exist: `make .venv52/.installed` needs a Python 3.13")
+        if Path(sys.prefix).resolve() == PY52.parent.parent.resolve():
+            pytest.skip("this run is bpy 5.2.3 itself: the [running] case")
+        exe = str(PY52)
+    pins = build_extension.check_pins()
+    src = tmp_path / "src"
+    (src / "wheels").mkdir(parents=True)
+    wheels, dists = [], []
+    for name, versions in pins.items():
+        dist = "bolus_probe_" + name.replace("-", "_")
+        dists.append(dist)
+        wheels += [probe_wheel(src / "wheels", dist, v, tag) for tag, v in versions.items()]
+    manifest = (ROOT / "blender_manifest.toml").read_text().replace('id = "bolus"', 'id = "bolus_wheel_probe"')
+    manifest = manifest.split("\n[build]")[0]
+    (src / "blender_manifest.toml").write_text(build_extension.staged_manifest(manifest, ["linux-x64", "macos-arm64",
+                                                                                          "macos-x64", "windows-x64"],
+                                                                             wheels))
+    (src / "__init__.py").write_text("def register():\n    pass\n\n\ndef unregister():\n    pass\n")
+    zpath = tmp_path / "probe.zip"
+    with zipfile.ZipFile(zpath, "w") as z:
+        for f in src.rglob("*"):
+            if f.is_file():
+                z.write(f, f.relative_to(src).as_posix())
+    user = tmp_path / "user"
+    user.mkdir()
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(user))
+    env.pop("PYTHONPATH", None)
+    p = subprocess.run([exe, "-c", PROBE, str(zpath), *dists], capture_output=True, text=True, timeout=300,
+                       env=env, cwd=str(user))
+    lines = [ln for ln in p.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert p.returncode == 0 and lines, p.stdout[-3000:] + p.stderr[-3000:]
+    res = json.loads(lines[-1][len("RESULT "):])
+    assert res["install"] == ["FINISHED"], res
+    for name, dist in zip(pins, dists):
+        assert res[dist] == [res["python"], pins[name][res["python"]]], (name, res)
