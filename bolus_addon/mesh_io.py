@@ -400,8 +400,6 @@ def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.n
         bm.faces.ensure_lookup_table()
         layer = bm.faces.layers.int.get(label_attr) or bm.faces.layers.int.new(label_attr)
         verts, faces = list(bm.verts), list(bm.faces)  # index tables go stale once we add
-        old_vert = {v: i for i, v in enumerate(verts)}
-        old_edge = {e: i for i, e in enumerate(bm.edges)}
         n_in = len(region.vert_ids)
         vmap = [verts[int(i)] for i in region.vert_ids]
         support = [frozenset((int(region.vert_ids[i]),)) for i in range(n_in)]
@@ -418,7 +416,7 @@ def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.n
             faces[int(f)][layer] = int(poly_label[f])
         new_faces = np.nonzero(replaced[out_poly])[0]
         created = []
-        split_edges = []  # (new edge, the input edge it is a piece of)
+        split_edges = []  # (new edge, the vertex pair of the input edge it is a piece of)
         for k in new_faces.tolist():
             src_face = faces[int(out_poly[k])]
             tri = [int(i) for i in res.F[k]]
@@ -435,79 +433,88 @@ def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.n
                 e = bm.edges.get((vmap[tri[a]], vmap[tri[b]]))
                 if orig is not None and e is not None and e is not orig:
                     e.copy_from(orig)
-                    split_edges.append((e, old_edge[orig]))
+                    split_edges.append((e, tuple(both)))
         bmesh.ops.delete(bm, geom=old_faces, context="FACES_ONLY")
         for e in old_edges:
             if e.is_valid and not e.link_faces:
                 bm.edges.remove(e)
-        kept = [(f, i) for i, f in enumerate(faces) if not replaced[i]]
-        old_edge = {e: i for e, i in old_edge.items() if e.is_valid}
-        _carry_flags(bm, old_vert, old_edge, kept, created, out_poly[new_faces], split_edges, flags)
         bm.faces.index_update()
+        bm.edges.index_update()
         created_index = np.array([f.index for f in created], dtype=np.int64)
+        kept_old = np.nonzero(~replaced)[0]
+        kept_new = np.array([faces[int(i)].index for i in kept_old], dtype=np.int64)
+        pieces = [(e.index, pair) for e, pair in split_edges if e.is_valid]
         bm.to_mesh(me)
     finally:
         bm.free()
     _interpolate_corners(me, region, res, new_faces, created_index, tri_loops, corner_data, nv_old)
+    _carry_flags(me, flags, nv_old, np.r_[kept_new, created_index], np.r_[kept_old, out_poly[new_faces]], pieces)
     me.update()
     return read_face_labels(me, label_attr)
 
 
 def _read_flags(me: bpy.types.Mesh) -> dict:
-    """Selection and hidden state of every vertex, edge and polygon (object mode)."""
-    out = {}
+    """Selection and hidden state of every vertex, edge and polygon, and the edges' vertices (object mode)."""
+    out = {"edge_verts": np.sort(_get(me.edges, "vertices", len(me.edges), np.int64, 2), axis=1)}
     for kind, coll in (("vert", me.vertices), ("edge", me.edges), ("face", me.polygons)):
         for flag in ("select", "hide"):
             out[kind, flag] = _get(coll, flag, len(coll), bool)
     return out
 
 
-def _carry_flags(bm, old_vert: dict, old_edge: dict, kept_faces, created, created_src, split_edges, flags) -> None:
+def _carry_flags(me: bpy.types.Mesh, old: dict, nv_old: int, face_new: np.ndarray, face_src: np.ndarray,
+                 pieces: list) -> None:
     """Make selection and hiding follow the region through `apply_cuts`' re-meshing.
 
-    ``old_vert``/``old_edge``: {BMesh element: mesh index} of the elements there before the
-    cut; ``kept_faces`` (BMFace, mesh index) of the polygons kept; ``created`` the new
-    faces and ``created_src`` (k,) the polygon each came from; ``split_edges`` (new edge,
-    input edge index) pairs.  Kept polygons keep their state, a new face takes its
-    polygon's; an edge or vertex is selected iff it lies on a selected face or was selected
-    before (a new piece of a selected edge too), hidden iff it was or, when new, iff all its
-    faces are hidden.  (``bmesh.ops.delete`` flushes the vertex selection into the faces,
-    which scrambled it: every flag is set here explicitly.)
+    ``old`` the `_read_flags` of the mesh before; vertices below ``nv_old`` are the old
+    ones; ``face_new`` (f,) every polygon of the new mesh, ``face_src`` (f,) the old
+    polygon it is or came from; ``pieces`` (new edge index, old edge's vertex pair).
+    A face is selected (hidden) iff its polygon was; an edge or vertex is selected iff it
+    lies on a selected face or was selected before (a piece of a selected edge too), and
+    hidden iff it was or, when new, iff all its faces are; nothing hidden is selected.
+    (``bmesh.ops.delete`` flushes the vertex selection into the faces, which scrambled it.)
     """
-    fsel, fhide = flags["face", "select"], flags["face", "hide"]
-    want = [(f, bool(fsel[i]), bool(fhide[i])) for f, i in kept_faces]
-    want += [(f, bool(fsel[p]), bool(fhide[p])) for f, p in zip(created, created_src.tolist())]
-    piece_of = dict(split_edges)
+    npoly, nv, ne = len(me.polygons), len(me.vertices), len(me.edges)
+    fhide = np.zeros(npoly, dtype=bool)
+    fsel = np.zeros(npoly, dtype=bool)
+    fhide[face_new] = old["face", "hide"][face_src]
+    fsel[face_new] = old["face", "select"][face_src] & ~fhide[face_new]
+    loop_e, loop_p = _loop_edges_and_polygons(me)
+    loop_v = _get(me.loops, "vertex_index", len(me.loops), np.int64)
+    # old edges by their (sorted) vertex pair: an edge of the new mesh is old iff its pair was
+    old_keys = old["edge_verts"][:, 0] * nv + old["edge_verts"][:, 1]
+    order = np.argsort(old_keys)
+    sorted_keys = old_keys[order]
 
-    def all_faces_hidden(ele) -> bool:
-        return bool(ele.link_faces) and all(f.hide for f in ele.link_faces)
+    def old_edge_of(pairs: np.ndarray) -> np.ndarray:
+        """(k,) old edge index of each vertex pair (k,2), or -1."""
+        pairs = np.sort(pairs, axis=1)
+        keys = pairs[:, 0] * nv + pairs[:, 1]
+        pos = np.minimum(np.searchsorted(sorted_keys, keys), len(order) - 1)
+        return np.where(sorted_keys[pos] == keys, order[pos], -1)
 
-    # hidden state first (a hidden element cannot be selected)
-    for f, _, hide in want:
-        if f.hide != hide:
-            f.hide = hide
-    for elems, old, hidden in ((bm.verts, old_vert, flags["vert", "hide"]), (bm.edges, old_edge, flags["edge", "hide"])):
-        for ele in elems:
-            i = old.get(ele)
-            hide = bool(hidden[i]) if i is not None else all_faces_hidden(ele)
-            if ele.hide != hide:
-                ele.hide = hide
-    # faces: deselect first (that may deselect their edges/verts), then select
-    for f, sel, hide in want:
-        if f.select and not (sel and not hide):
-            f.select = False
-    for f, sel, hide in want:
-        if sel and not hide and not f.select:
-            f.select = True
-    for elems, old, selected in ((bm.edges, {**old_edge, **piece_of}, flags["edge", "select"]),
-                                 (bm.verts, old_vert, flags["vert", "select"])):
-        for ele in elems:
-            if ele.hide:
-                continue
-            i = old.get(ele)
-            sel = any(f.select for f in ele.link_faces) or (i is not None and bool(selected[i]))
-            if ele.select != sel:
-                ele.select = sel
+    edge_old = old_edge_of(_get(me.edges, "vertices", ne, np.int64, 2))
+    piece_old = np.full(ne, -1, dtype=np.int64)
+    if pieces:
+        piece_old[np.array([i for i, _ in pieces], dtype=np.int64)] = old_edge_of(np.array([p for _, p in pieces]))
+
+    def flags_of(n, elem_of_loop, was, kind):
+        """(select, hide) of n vertices or edges; was (n,) old index or -1."""
+        faces_at = np.bincount(elem_of_loop, minlength=n)
+        hidden_at = np.bincount(elem_of_loop, weights=fhide[loop_p], minlength=n)
+        on_sel = np.zeros(n, dtype=bool)
+        on_sel[elem_of_loop[fsel[loop_p]]] = True
+        hide = np.where(was >= 0, old[kind, "hide"][np.maximum(was, 0)], (faces_at > 0) & (hidden_at == faces_at))
+        sel = on_sel | ((was >= 0) & old[kind, "select"][np.maximum(was, 0)])
+        return sel & ~hide, hide
+
+    vert_old = np.where(np.arange(nv) < nv_old, np.arange(nv), -1)
+    vsel, vhide = flags_of(nv, loop_v, vert_old, "vert")
+    esel, ehide = flags_of(ne, loop_e, edge_old, "edge")
+    esel |= (piece_old >= 0) & old["edge", "select"][np.maximum(piece_old, 0)] & ~ehide
+    for coll, sel, hide in ((me.vertices, vsel, vhide), (me.edges, esel, ehide), (me.polygons, fsel, fhide)):
+        coll.foreach_set("hide", hide)
+        coll.foreach_set("select", sel)
 
 
 _CORNER_WIDTH = {"FLOAT": 1, "FLOAT2": 2, "FLOAT_VECTOR": 3, "FLOAT_COLOR": 4, "BYTE_COLOR": 4, "INT": 1,
