@@ -87,8 +87,10 @@ extension: $(VENV)/.installed
 	mkdir -p dist
 	$(PY) -c "import bpy, os, subprocess, sys; cli = os.path.join(bpy.utils.system_resource('SCRIPTS'), 'addons_core', 'bl_pkg', 'cli', 'blender_ext.py'); sys.exit(subprocess.call([sys.executable, cli, 'build', '--source-dir', '.', '--output-dir', 'dist']))"
 
+# ... then installs this machine's zip into every Blender venv present, without the venv's own
+# scipy / scikit-learn, and runs segment and unfold through it (scripts/build_extension.py --check).
 extension-wheels: $(VENV)/.installed
-	$(PY) scripts/build_extension.py --out dist
+	$(PY) scripts/build_extension.py --out dist --check $(wildcard $(PY42) $(PY45) $(PY) $(PY52))
 
 clean:
 	rm -rf out dist build .pytest_cache

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.metadata as md
+import json
 import os
 import re
 import shutil
@@ -106,11 +107,158 @@ def zip_wheel_tags(path: Path) -> dict[str, set[str]]:
     return out
 
 
+# Runs in the other Blender: install the zip, enable it, segment and unfold a bent sheet
+# (a piece of a cylinder of radius 0.2 m, 100 mm wide, in a 1 m-unit scene) through the
+# installed add-on, and print what a user would check.
+INSTALL_AND_RUN = r"""
+import json, sys
+import bpy
+import numpy as np
+
+ZIP, USER = sys.argv[1], sys.argv[2]
+out = {"bpy": bpy.app.version_string, "python": "%d.%d" % sys.version_info[:2], "numpy": np.__version__}
+r = bpy.ops.extensions.package_install_files(filepath=ZIP, repo="user_default", enable_on_install=True)
+out["install"] = sorted(r)
+out["enabled"] = "bl_ext.user_default.bolus" in bpy.context.preferences.addons
+out["scene_prop"] = hasattr(bpy.types.Scene, "bolus")
+mod = sys.modules.get("bl_ext.user_default.bolus.bolus_addon.operators")
+out["module_file"] = getattr(mod, "__file__", "")
+
+n = 11
+x, y = np.meshgrid(np.linspace(-0.05, 0.05, n), np.linspace(-0.05, 0.05, n))
+R = 0.2
+V = np.stack([R * np.sin(x.ravel() / R), y.ravel(), R * (1 - np.cos(x.ravel() / R))], 1)
+ids = np.arange(n * n).reshape(n, n)
+Q = np.stack([ids[:-1, :-1], ids[:-1, 1:], ids[1:, 1:], ids[1:, :-1]], -1).reshape(-1, 4)
+me = bpy.data.meshes.new("sheet")
+me.from_pydata(V.tolist(), [], Q.tolist())
+me.update()
+ob = bpy.data.objects.new("sheet", me)
+bpy.context.scene.collection.objects.link(ob)
+bpy.context.view_layer.objects.active = ob
+ob.select_set(True)
+
+out["segment"] = sorted(bpy.ops.bolus.segment(patches=2))
+a = ob.data.attributes["bolus_patch"]
+lab = np.zeros(len(ob.data.polygons), dtype=np.int32)
+a.data.foreach_get("value", lab)
+out["patch_labels"] = sorted(set(lab.tolist()))
+
+out["unfold"] = sorted(bpy.ops.bolus.unfold())
+pat = bpy.data.objects.get("sheet_pattern")
+out["pattern"] = pat is not None
+if pat is not None:
+    pm = pat.data
+    P = np.zeros(len(pm.vertices) * 3)
+    pm.vertices.foreach_get("co", P)
+    P = P.reshape(-1, 3)
+    src = np.zeros(len(pm.polygons), dtype=np.int32)
+    pm.attributes["bolus_source_face"].data.foreach_get("value", src)
+    out["pattern_max_abs_z"] = float(np.abs(P[:, 2]).max())
+    out["pattern_faces_cover_source"] = sorted(src.tolist()) == list(range(len(me.polygons)))
+    # edge-length error EL (SPEC) of the pattern against the sheet
+    L = L0 = 0.0
+    for k, poly in enumerate(pm.polygons):
+        pv = list(poly.vertices)
+        sv = list(me.polygons[int(src[k])].vertices)
+        for i in range(len(pv)):
+            l1 = np.linalg.norm(P[pv[i]] - P[pv[(i + 1) % len(pv)]])
+            l0 = np.linalg.norm(V[sv[i]] - V[sv[(i + 1) % len(sv)]])
+            L += abs(l1 - l0)
+            L0 += l0
+    out["EL"] = L / L0
+out["modules"] = {m: getattr(sys.modules.get(m), "__file__", None) for m in ("scipy", "sklearn")}
+print("RESULT " + json.dumps(out))
+"""
+
+
+
+#: what the extension's wheels bring; hidden from the Blender under test by `--check`
+BUNDLED_MODULES = ("scipy", "sklearn", "scikit_learn", "joblib", "threadpoolctl", "narwhals", "cloudpickle")
+
+
+def _site_without_bundled(python: str, dest: Path) -> Path:
+    """A folder of links to ``python``'s site-packages minus the packages the wheels bring."""
+    site = subprocess.check_output([python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                                   text=True).strip()
+    dest.mkdir(parents=True, exist_ok=True)
+    for entry in Path(site).iterdir():
+        if not entry.name.lower().startswith(BUNDLED_MODULES):
+            (dest / entry.name).symlink_to(entry)
+    return dest
+
+
+def install_and_run(python: str, zip_path: Path, user: Path, hide_bundled: bool = False) -> tuple[dict | None, str]:
+    """Install ``zip_path`` into the Blender (bpy) of ``python`` with a throw-away user folder
+    ``user``, enable it, segment and unfold a bent sheet through the installed add-on.
+
+    ``hide_bundled``: run without the interpreter's own scipy / scikit-learn (``-S`` and a
+    copy of its site-packages without them), so that only the zip's wheels can provide them.
+    Returns (the RESULT dict or None, the output for a failure message).
+    """
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(user))
+    env.pop("PYTHONPATH", None)
+    cmd = [python, "-c", INSTALL_AND_RUN, str(Path(zip_path).resolve()), str(user)]
+    if hide_bundled:
+        env["PYTHONPATH"] = str(_site_without_bundled(python, user / "_site"))
+        cmd.insert(1, "-S")
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env, cwd=str(user))
+    lines = [ln for ln in p.stdout.splitlines() if ln.startswith("RESULT ")]
+    if p.returncode != 0 or not lines:
+        return None, p.stdout[-3000:] + p.stderr[-3000:]
+    return json.loads(lines[-1][len("RESULT "):]), p.stdout[-3000:]
+
+
+def installed_run_problems(res: dict, user: Path) -> list[str]:
+    """What is wrong with an `install_and_run` result (empty: installed, enabled, segment and unfold worked)."""
+    bad = []
+    if not (res["install"] == ["FINISHED"] and res["enabled"] and res["scene_prop"]):
+        bad.append("install/enable failed")
+    if not Path(res["module_file"] or "/").resolve().is_relative_to(Path(user).resolve()):
+        bad.append(f"operators not from the installed copy: {res['module_file']}")
+    if res["segment"] != ["FINISHED"] or res["patch_labels"] != [0, 1]:
+        bad.append(f"segment: {res['segment']}, bolus_patch values {res['patch_labels']}")
+    if res["unfold"] != ["FINISHED"] or not res["pattern"]:
+        bad.append(f"unfold: {res['unfold']}, pattern object {res['pattern']}")
+    elif not (res["pattern_max_abs_z"] <= 1e-6 and res["pattern_faces_cover_source"] and res["EL"] < 0.02):
+        bad.append(f"pattern: |z| <= {res['pattern_max_abs_z']:.2g}, faces cover the source "
+                   f"{res['pattern_faces_cover_source']}, EL {res['EL']:.4f} (a cylinder piece: < 0.02)")
+    return bad
+
+
+def check_zip(zip_path: Path, pythons: list[str]) -> int:
+    """Install ``zip_path`` into each bpy ``python`` without its own scipy / scikit-learn; 0 if all work."""
+    import tempfile
+
+    failed = 0
+    for python in pythons:
+        with tempfile.TemporaryDirectory(prefix="bolus-check-") as tmp:
+            user = Path(tmp)
+            res, log = install_and_run(python, zip_path, user, hide_bundled=True)
+            if res is None:
+                bad = ["did not finish:\n" + log]
+            else:
+                bad = installed_run_problems(res, user)
+                bad += [f"{m} not from the zip's wheels: {f}" for m, f in res["modules"].items()
+                        if f is None or not Path(f).resolve().is_relative_to(user.resolve())]
+            if bad:
+                print(f"  FAILED {zip_path.name} with {python}:\n    " + "\n    ".join(bad))
+            else:
+                print(f"  ok {zip_path.name} in bpy {res['bpy']} (Python {res['python']}, numpy {res['numpy']}): "
+                      f"segment and unfold finished, EL {res['EL']:.4f}, scipy and scikit-learn from the zip's wheels")
+            failed += bool(bad)
+    return int(failed > 0)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default=str(ROOT / "dist"))
     ap.add_argument("--cache", default=str(ROOT / "build" / "wheels"))
     ap.add_argument("--platforms", nargs="+", default=list(PLATFORMS), choices=list(PLATFORMS))
+    ap.add_argument("--check", nargs="+", metavar="PYTHON", default=[],
+                    help="after building, install this machine's zip into the bpy of each PYTHON (e.g. "
+                         ".venv42/bin/python .venv52/bin/python) without its own scipy / scikit-learn, "
+                         "and run segment and unfold through it")
     args = ap.parse_args()
     pins = check_pins()
     cache, out = Path(args.cache), Path(args.out)
@@ -163,6 +311,16 @@ def main() -> int:
         return 1
     print(f"extension zips in {out}: " + ", ".join(z.name for z in zips) + "  (wheels for "
           + ", ".join(f"{t}: Blender {b}" for t, (_, _, b) in PYTHONS.items()) + ")")
+    if args.check:
+        import sysconfig
+
+        host = {"linux-x86_64": "linux_x64", "win-amd64": "windows_x64", "macosx-arm64": "macos_arm64"}.get(
+            sysconfig.get_platform(), "macos_x64" if sysconfig.get_platform().startswith("macosx") else "?")
+        mine = [z for z in zips if z.stem.endswith(host)]
+        if not mine:
+            print(f"--check: no zip for this machine ({sysconfig.get_platform()})")
+            return 1
+        return check_zip(mine[0], [str(Path(p).absolute()) for p in args.check])
     return 0
 
 

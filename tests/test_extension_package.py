@@ -65,88 +65,16 @@ def test_zip_holds_the_addon_and_no_dev_files(built_zip):
         assert not any(n.startswith(banned) or f"/{banned}" in n for n in names), f"{banned} leaked into the zip"
 
 
-# Runs in the other Blender: install the zip, enable it, segment and unfold a bent sheet
-# (a piece of a cylinder of radius 0.2 m, 100 mm wide, in a 1 m-unit scene) through the
-# installed add-on, and print what a user would check.
-INSTALL_AND_RUN = r"""
-import json, sys
-import bpy
-import numpy as np
-
-ZIP, USER = sys.argv[1], sys.argv[2]
-out = {"bpy": bpy.app.version_string, "python": "%d.%d" % sys.version_info[:2], "numpy": np.__version__}
-r = bpy.ops.extensions.package_install_files(filepath=ZIP, repo="user_default", enable_on_install=True)
-out["install"] = sorted(r)
-out["enabled"] = "bl_ext.user_default.bolus" in bpy.context.preferences.addons
-out["scene_prop"] = hasattr(bpy.types.Scene, "bolus")
-mod = sys.modules.get("bl_ext.user_default.bolus.bolus_addon.operators")
-out["module_file"] = getattr(mod, "__file__", "")
-
-n = 11
-x, y = np.meshgrid(np.linspace(-0.05, 0.05, n), np.linspace(-0.05, 0.05, n))
-R = 0.2
-V = np.stack([R * np.sin(x.ravel() / R), y.ravel(), R * (1 - np.cos(x.ravel() / R))], 1)
-ids = np.arange(n * n).reshape(n, n)
-Q = np.stack([ids[:-1, :-1], ids[:-1, 1:], ids[1:, 1:], ids[1:, :-1]], -1).reshape(-1, 4)
-me = bpy.data.meshes.new("sheet")
-me.from_pydata(V.tolist(), [], Q.tolist())
-me.update()
-ob = bpy.data.objects.new("sheet", me)
-bpy.context.scene.collection.objects.link(ob)
-bpy.context.view_layer.objects.active = ob
-ob.select_set(True)
-
-out["segment"] = sorted(bpy.ops.bolus.segment(patches=2))
-a = ob.data.attributes["bolus_patch"]
-lab = np.zeros(len(ob.data.polygons), dtype=np.int32)
-a.data.foreach_get("value", lab)
-out["patch_labels"] = sorted(set(lab.tolist()))
-
-out["unfold"] = sorted(bpy.ops.bolus.unfold())
-pat = bpy.data.objects.get("sheet_pattern")
-out["pattern"] = pat is not None
-if pat is not None:
-    pm = pat.data
-    P = np.zeros(len(pm.vertices) * 3)
-    pm.vertices.foreach_get("co", P)
-    P = P.reshape(-1, 3)
-    src = np.zeros(len(pm.polygons), dtype=np.int32)
-    pm.attributes["bolus_source_face"].data.foreach_get("value", src)
-    out["pattern_max_abs_z"] = float(np.abs(P[:, 2]).max())
-    out["pattern_faces_cover_source"] = sorted(src.tolist()) == list(range(len(me.polygons)))
-    # edge-length error EL (SPEC) of the pattern against the sheet
-    L = L0 = 0.0
-    for k, poly in enumerate(pm.polygons):
-        pv = list(poly.vertices)
-        sv = list(me.polygons[int(src[k])].vertices)
-        for i in range(len(pv)):
-            l1 = np.linalg.norm(P[pv[i]] - P[pv[(i + 1) % len(pv)]])
-            l0 = np.linalg.norm(V[sv[i]] - V[sv[(i + 1) % len(sv)]])
-            L += abs(l1 - l0)
-            L0 += l0
-    out["EL"] = L / L0
-print("RESULT " + json.dumps(out))
-"""
-
-
 def install_and_run(python: Path | str, zip_path: Path, user: Path) -> dict:
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(user))
-    env.pop("PYTHONPATH", None)
-    p = subprocess.run([str(python), "-c", INSTALL_AND_RUN, str(zip_path), str(user)], capture_output=True,
-                       text=True, timeout=300, env=env, cwd=str(user))  # cwd: the work tree is not importable
-    lines = [ln for ln in p.stdout.splitlines() if ln.startswith("RESULT ")]
-    assert p.returncode == 0 and lines, p.stdout[-3000:] + p.stderr[-3000:]
-    return json.loads(lines[-1][len("RESULT "):])
+    """`build_extension.install_and_run` (install, enable, segment, unfold a bent sheet) in ``python``."""
+    res, log = build_extension.install_and_run(str(python), zip_path, user)
+    assert res is not None, log
+    return res
 
 
 def check_installed_run(res: dict, user: Path) -> None:
-    assert res["install"] == ["FINISHED"] and res["enabled"] and res["scene_prop"], res
-    # the operators came from the installed copy in the throw-away user folder
-    assert Path(res["module_file"]).resolve().is_relative_to(user.resolve()), res["module_file"]
-    assert res["segment"] == ["FINISHED"] and res["patch_labels"] == [0, 1], res
-    assert res["unfold"] == ["FINISHED"] and res["pattern"], res
-    assert res["pattern_max_abs_z"] <= 1e-6 and res["pattern_faces_cover_source"], res
-    assert res["EL"] < 0.02, res  # a piece of a cylinder unfolds almost isometrically
+    problems = build_extension.installed_run_problems(res, user)
+    assert not problems, (problems, res)
 
 
 def test_blender_installs_the_zip_and_runs_segment_and_unfold(built_zip, tmp_path):
