@@ -16,6 +16,9 @@ and the *smooth* one after ``bolus.smooth_cuts()``.  Printed:
   the largest distance of the new cut from the old border in mm (symmetric
   Hausdorff);
 * the wall time of smooth_cuts;
+* a second ``bolus.smooth_cuts()`` on the result: the new vertices it adds (must be 0:
+  smooth_cuts is idempotent, issue 9) and whether the polygons and ``bolus_patch`` stay
+  identical;
 * EL and EA of ``bolus.unfold()`` on both copies (SPEC measures, whole pattern and per
   patch): the seed's Table 4-5 says they should stay about equal or improve.
 
@@ -30,6 +33,8 @@ import os
 import sys
 import time
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 for p in (ROOT, ROOT / "bench"):
@@ -78,6 +83,17 @@ def duplicate(bpy, ob, name):
     return dup
 
 
+def mesh_state(me) -> tuple:
+    """(vertex positions, polygon corners, bolus_patch) of a mesh."""
+    co = np.empty(len(me.vertices) * 3)
+    me.vertices.foreach_get("co", co)
+    loops = np.empty(len(me.loops), dtype=np.int64)
+    me.loops.foreach_get("vertex_index", loops)
+    lab = np.empty(len(me.polygons), dtype=np.int64)
+    me.attributes["bolus_patch"].data.foreach_get("value", lab)
+    return co, loops, lab
+
+
 def pattern_figures(bpy, ob) -> dict:
     pat = bpy.data.objects[ob.name + "_pattern"]
     return json.loads(pat["bolus_pattern_table"])
@@ -95,6 +111,17 @@ def bench_mesh(bpy, fname: str, scale_length: float, patches: int, args) -> dict
     borders = json.loads(ob["bolus_cut_table"])
     row = {"mesh": fname, "faces": len(jag.data.polygons), "patches": patches, "smooth_cuts_s": t_cut,
            "new_vertices": len(ob.data.vertices) - len(jag.data.vertices), "borders": borders}
+    # a second run on the result must change nothing
+    before = mesh_state(ob.data)
+    t0 = time.perf_counter()
+    try:
+        call(bpy, bpy.ops.bolus.smooth_cuts, ob, args.verbose)
+    except RuntimeError as exc:  # recorded: a second run must not fail either
+        row["second_run_error"] = str(exc).splitlines()[0]
+    after = mesh_state(ob.data)
+    row["second_run_s"] = time.perf_counter() - t0
+    row["second_run_new_vertices"] = len(after[0]) - len(before[0])
+    row["second_run_identical"] = all(np.array_equal(x, y) for x, y in zip(before, after))
     if not args.no_unfold:
         for key, o in (("jagged", jag), ("smooth", ob)):
             t0 = time.perf_counter()
@@ -105,7 +132,13 @@ def bench_mesh(bpy, fname: str, scale_length: float, patches: int, args) -> dict
 
 def print_row(r: dict) -> None:
     print(f"\n{r['mesh']}: {r['faces']} faces, {r['patches']} patches asked; smooth_cuts {r['smooth_cuts_s']:.2f} s, "
-          f"{r['new_vertices']} new vertices")
+          f"{r['new_vertices']} new vertices; second run: {r['second_run_new_vertices']} new vertices, "
+          f"mesh {'identical' if r['second_run_identical'] else 'CHANGED'} ({r['second_run_s']:.2f} s)"
+          + (f" ERROR: {r['second_run_error']}" if "second_run_error" in r else ""))
+    tb = sum(b["turning_before"] * b["length_before_mm"] for b in r["borders"])
+    ta = sum(b["turning_after"] * b["length_after_mm"] for b in r["borders"])
+    if tb > 0:
+        print(f"  length-weighted turning of its borders: {(1 - ta / tb) * 100:.0f} % lower")
     print(f"  {'border':>7} {'method':<22} {'turn before':>11} {'turn after':>10} {'lower by':>8} {'moved mm':>8}  ok")
     for b in r["borders"]:
         drop = 1.0 - b["turning_after"] / b["turning_before"] if b["turning_before"] > 0 else 0.0
@@ -146,6 +179,12 @@ def main(argv=None) -> int:
     straight = sum(1 for b in allb if b["turning_before"] < STRAIGHT)
     print(f"\n{met} of {len(allb)} borders turn at least {TARGET * 100:.0f} % less per mm after smooth_cuts "
           f"({straight} were already straight, under {STRAIGHT} rad/mm)")
+    weighted = [(b["turning_before"] * b["length_before_mm"], b["turning_after"] * b["length_after_mm"]) for b in allb]
+    tb, ta = sum(w[0] for w in weighted), sum(w[1] for w in weighted)
+    if tb > 0:
+        print(f"length-weighted over all borders: the turning is {(1 - ta / tb) * 100:.0f} % lower")
+    print(f"second run: {sum(r['second_run_new_vertices'] for r in rows)} new vertices in all, "
+          f"{sum(not r['second_run_identical'] for r in rows)} of {len(rows)} meshes changed")
     if args.json:
         write_json(args.json, {"rows": rows, "target_drop": TARGET})
     return 0

@@ -1041,13 +1041,15 @@ def _one_pass(st: _State, snap: float, tracks: list[_Track], pass_no: int, memo:
             if pass_no == 0:
                 tr.report, tr.changed = rep, cut
                 tracks.append(tr)
-            elif cut and tr is not None:
-                if tr.changed and tr.report.method != rep.method:
-                    rep.note = "; ".join(x for x in (tr.report.note, f"{tr.report.method}, then {rep.method} where later cuts had moved its ends") if x)
-                elif tr.changed:
-                    rep.note = tr.report.note
-                rep.turning_before, rep.length_before_mm = tr.report.turning_before, tr.report.length_before_mm
-                rep.border_vertices = tr.report.border_vertices
+            elif cut and tr is None:  # a border no input border led to: a row of its own
+                tracks.append(_Track(rep, match[0].edges.copy(), _edge_samples(match[0].edges, st.V, 5), True))
+            elif cut:
+                prev = tr.report
+                how = (f"{prev.method} first, then {rep.method} where the other cuts had moved its ends" if tr.changed
+                       else f"{rep.method} once the other cuts had moved its ends")
+                rep.note = "; ".join(x for x in ((prev.note if tr.changed else ""), how) if x)
+                rep.turning_before, rep.length_before_mm = prev.turning_before, prev.length_before_mm
+                rep.border_vertices = prev.border_vertices
                 tr.report, tr.changed = rep, True
     return st, changed
 
