@@ -788,3 +788,19 @@ def test_unfold_prints_the_core_progress(bpy_addon, scene, capfd):
     assert bpy.ops.bolus.unfold() == {"FINISHED"}
     lines = [ln for ln in capfd.readouterr().out.splitlines() if ln.startswith("bolus.unfold: ")]
     assert lines and re.fullmatch(r"bolus\.unfold: patch 1/2: .+ \d+ %", lines[0]), lines
+
+
+def test_unfold_reads_an_int8_patch_attribute_in_edit_mode(bpy_addon, scene):
+    """Labels written by other tools as 8-bit integers (no edit-mesh accessor) are read too."""
+    bpy = bpy_addon
+    ob, c = bump_grid(bpy)
+    attr = ob.data.attributes.new("bolus_patch", "INT8", "FACE")
+    labels = (c[:, 0] > 50.0).astype(np.int8)
+    attr.data.foreach_set("value", labels)
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_all(action="SELECT")
+    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert ob.mode == "EDIT"
+    pat = bpy.data.objects["skin_pattern"].data
+    src = attr_array(pat, "bolus_source_face", np.int64)
+    np.testing.assert_array_equal(attr_array(pat, "bolus_patch", np.int64), labels[src])
