@@ -376,6 +376,9 @@ def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.n
     ):
         raise BolusError("internal error: apply_cuts needs a region read from this mesh")
     tri_loops = tri_loops[region.tri_index]
+    attr = me.attributes.get(label_attr)
+    if attr is not None and attr.data_type != "INT":  # e.g. INT8 from another tool: BMesh writes INT
+        write_attribute(me, label_attr, "INT", "FACE", read_face_labels(me, label_attr))
     corner_data = _corner_attributes(me)
     nv_old = len(me.vertices)
     flags = _read_flags(me)

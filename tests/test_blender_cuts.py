@@ -760,3 +760,21 @@ def test_each_border_reported_once(bpy_addon, scene, capfd):
     assert len(lines) == len(rows)
     for r in rows:
         assert sum(f"Border {r['a']}|{r['b']} (" in ln for ln in lines) == 1
+
+
+def test_int8_patch_attribute(bpy_addon, scene):
+    """bolus_patch stored as 8-bit integers (another tool) is cut like the INT one segment writes."""
+    bpy = bpy_addon
+    V, F = quad_grid()
+    ob = make_object(bpy, V, F, scale_length=0.001)
+    c = V[F].mean(axis=1)
+    ob.data.attributes.new("bolus_patch", "INT8", "FACE").data.foreach_set("value", line_rule(c[:, 0], c[:, 1]).astype(np.int8))
+    n0 = len(ob.data.vertices)
+    assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
+    me = ob.data
+    assert len(me.vertices) > n0
+    assert [a.name for a in me.attributes].count("bolus_patch") == 1
+    lab = labels_of(me)
+    assert set(np.unique(lab).tolist()) == {0, 1}
+    assert_labels_connected(me, lab)
+    check_straight_border(me, n0, lab)
