@@ -220,9 +220,9 @@ class BOLUS_OT_saliency_preview(BolusOperator, bpy.types.Operator):
 
     def run(self, context):
         region, topo, warnings = self.read_region(context, allow_nonmanifold=True)
-        self.progress(0.2)
+        self.progress(0.2, "angle sums and saliency")
         res = analyse(region.V, region.F, self.smoothing_mm, topo=topo)
-        self.progress(0.8)
+        self.progress(0.8, "writing attributes")
         obj, me = region.obj, region.mesh
         nv = len(me.vertices)
         varpi = np.zeros(nv)
