@@ -140,3 +140,65 @@ def test_bad_patches():
     Vz[:, :] = 0.0
     with pytest.raises(BolusError, match="no area"):
         unfold_patch(Vz, Fz)
+
+
+def test_hopeless_patch_is_flagged_with_its_figures():
+    # issue 9 item 4/5: a 120 degree cap of 10 mm radius cannot lie flat in one piece
+    V, F = spherical_cap(10.0, 120.0, 3)
+    u = unfold_patch(V, F)
+    assert u.hopeless
+    assert u.EL > 0.10 or u.EA > 0.20
+    assert u.angle_deficit > 2 * np.pi  # more than a hemisphere's worth of missing angle
+    assert "EL" in u.hopeless_reason and "angle deficit" in u.hopeless_reason
+    assert any("cannot lie flat" in w for w in u.warnings)
+    assert u.flipped == 0  # the quick pattern still has no fold
+
+
+def test_mild_cap_is_not_hopeless():
+    V, F = spherical_cap(10.0, 30.0, 3)
+    u = unfold_patch(V, F)
+    assert not u.hopeless and u.hopeless_reason == ""
+    assert u.EL < 0.02 and u.flipped == 0 and u.overlaps == 0
+    assert 0 < u.angle_deficit < 1.0 and u.angle_excess < 1e-6  # a sphere: deficit only
+
+
+def test_progress_is_reported_with_increasing_fractions():
+    V, F = spherical_cap(100.0, 60.0, 4)
+    calls = []
+    unfold_patch(V, F, progress=lambda f, t: calls.append((f, t)))
+    fr = [f for f, _ in calls]
+    assert fr[0] == 0.0 and fr[-1] == 1.0
+    assert all(b >= a for a, b in zip(fr, fr[1:]))
+    texts = {t for _, t in calls}
+    assert {"initial unfolding", "relaxing springs", "length refinement"} <= texts
+
+
+def test_patches_progress_is_overall_and_weighted_by_size():
+    V, F = spherical_cap(100.0, 50.0, 3)
+    labels = np.where(V[F].mean(axis=1)[:, 0] < -30.0, 0, 1)  # a small and a large patch
+    calls = []
+    list(iter_unfold_patches(V, F, labels, progress=lambda f, t: calls.append((f, t))))
+    fr = [f for f, _ in calls]
+    assert all(b >= a for a, b in zip(fr, fr[1:])) and fr[-1] == pytest.approx(1.0)
+    first_done = max(f for f, t in calls if t.startswith("patch 1/2"))
+    assert first_done == pytest.approx((labels == 0).mean())  # patch 1 ends at its share of the triangles
+    assert all(t.startswith(("patch 1/2: ", "patch 2/2: ")) for _, t in calls)
+
+
+def test_progress_is_reported_inside_long_minimisations():
+    V, F = spherical_cap(100.0, 60.0, 4)
+    topo = MeshTopology(V, F)
+    springs = build_springs(topo)
+    UV0 = initial_unfolding(topo) * 1.3  # far from rest: many iterations
+    seen = []
+    clock = iter(range(10**6))
+    import bolus_addon.core.unfold as unfold_mod
+
+    real = unfold_mod.time.perf_counter
+    try:  # a clock that advances 1 s per reading: every iteration is "0.5 s later"
+        unfold_mod.time.perf_counter = lambda: float(next(clock))
+        _, it, _ = relax_lbfgs(UV0, springs, max_iter=30, tol=0.0, progress=seen.append)
+    finally:
+        unfold_mod.time.perf_counter = real
+    assert it >= 5 and len(seen) >= it - 2
+    assert all(0 < f <= 1 for f in seen) and seen == sorted(seen)
