@@ -745,9 +745,26 @@ def _hausdorff(E_old: np.ndarray, V_old: np.ndarray, E_new: np.ndarray, V_new: n
     return float(max(cKDTree(A).query(B)[0].max(), cKDTree(B).query(A)[0].max()))
 
 
-def _diffused_indicator(st: _State, a: int, b: int, sigma: float) -> np.ndarray:
-    """MBO field on the vertices of patches a and b: > 0 on the a side (module doc)."""
+def _diffused_indicator(st: _State, a: int, b: int, sigma: float, border: Border | None = None,
+                        reach: float = np.inf) -> np.ndarray:
+    """MBO field on the vertices of patches a and b: > 0 on the a side (module doc).
+
+    With ``border`` and a finite ``reach`` (mm) only the faces of a and b whose centroid is
+    within reach of the border take part (NaN elsewhere): the field near the border, where
+    the cut is looked for, depends on the patches within a few sigma of it only (the
+    implicit step's kernel decays like exp(-sqrt(2) d / sigma)).
+    """
     in_u = (st.labels == a) | (st.labels == b)
+    if border is not None and np.isfinite(reach):
+        faces = np.nonzero(in_u)[0]
+        C = st.V[st.F[faces]].mean(axis=1)
+        pts = _edge_samples(border.edges, st.V, 3)
+        box = np.all((C >= pts.min(axis=0) - reach) & (C <= pts.max(axis=0) + reach), axis=1)
+        near = np.zeros(len(faces), dtype=bool)
+        d, _ = cKDTree(pts).query(C[box], distance_upper_bound=reach)
+        near[np.nonzero(box)[0]] = np.isfinite(d)
+        in_u = np.zeros(len(st.F), dtype=bool)
+        in_u[faces[near]] = True
     Fu = st.F[in_u]
     ids, inv = np.unique(Fu.ravel(), return_inverse=True)
     Fl = inv.reshape(-1, 3)
@@ -856,9 +873,11 @@ def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: 
         sigma = sigma_edges * h
         attempts.append(("smoothed path", sigma, True, 4.0 * sigma + 2.0 * h, 0.0))
     fallback = None  # best smoothed path that is valid but not yet smooth enough
+    same = False  # a valid cut was found, but it is not measurably smoother than the border
     for name, phi_fn, linear, R, rms in attempts:
         if name == "smoothed path":  # phi given at the vertices
-            phi_fn = _diffused_indicator(st, a, b, phi_fn)
+            # the cut is looked for within 2 R of the border; 6 sigma more of the patches around it
+            phi_fn = _diffused_indicator(st, a, b, phi_fn, border, 2.0 * R + 6.0 * phi_fn)
         for grow in (1.0, 2.0):
             band = _band(st, topo, border, all_borders, R * grow)
             try:
@@ -874,9 +893,11 @@ def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: 
                 continue
             if turn1 >= turn0 or turn1 > (1.0 - MIN_GAIN) * turn0:
                 reasons.append(f"{name}: {NOT_SMOOTHER}")
+                same = True
                 continue
             if shift < MIN_SHIFT * h:
                 reasons.append(f"{name}: {NEGLIGIBLE}")
+                same = True
                 continue
             result = (new_st, name, len1, turn1, shift, rms)
             if turn1 > SMOOTH_ENOUGH * turn0:
@@ -890,7 +911,7 @@ def _smooth_border(st: _State, border: Border, all_borders: list[Border], snap: 
     if fallback is not None:
         return _accept(report, fallback, reasons)
     report.note = "left as it is: " + "; ".join(dict.fromkeys(reasons))
-    if reasons and all(r.endswith((NOT_SMOOTHER, NEGLIGIBLE, "would vanish")) for r in reasons):
+    if same:
         report.note = f"{ALREADY_SMOOTH} (no cut we can fit is measurably smoother)"
     return st, report
 
@@ -973,6 +994,7 @@ class _Track:
     edges: np.ndarray  #: (k,2) its edges in the input (input vertices never move)
     samples: np.ndarray  #: (s,3) points along them
     changed: bool = False
+    first: tuple[str, str] = ("unchanged", "")  #: (method, note) of the first pass
 
 
 def _nearest_track(tracks: list[_Track], border: Border, V: np.ndarray) -> _Track | None:
@@ -1039,15 +1061,16 @@ def _one_pass(st: _State, snap: float, tracks: list[_Track], pass_no: int, memo:
             else:
                 seen[key] = now
             if pass_no == 0:
-                tr.report, tr.changed = rep, cut
+                tr.report, tr.changed, tr.first = rep, cut, (rep.method, rep.note)
                 tracks.append(tr)
             elif cut and tr is None:  # a border no input border led to: a row of its own
                 tracks.append(_Track(rep, match[0].edges.copy(), _edge_samples(match[0].edges, st.V, 5), True))
             elif cut:
                 prev = tr.report
-                how = (f"{prev.method} first, then {rep.method} where the other cuts had moved its ends" if tr.changed
-                       else f"{rep.method} once the other cuts had moved its ends")
-                rep.note = "; ".join(x for x in ((prev.note if tr.changed else ""), how) if x)
+                method0, note0 = tr.first
+                how = (f"{method0} first, then {rep.method} where the other cuts had moved its ends"
+                       if method0 != "unchanged" else f"{rep.method} once the other cuts had moved its ends")
+                rep.note = "; ".join(x for x in ((note0 if method0 != "unchanged" else ""), how) if x)
                 rep.turning_before, rep.length_before_mm = prev.turning_before, prev.length_before_mm
                 rep.border_vertices = prev.border_vertices
                 tr.report, tr.changed = rep, True
