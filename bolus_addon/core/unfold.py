@@ -1093,7 +1093,8 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     - hopeless patches (``hopeless``) are told early: after the length refinement, a
       pattern with EL > `HOPELESS_EL` or EA > `HOPELESS_EA` cannot be rescued by the
       overlap correction (it only moves the outline), so that correction is skipped
-      and the pattern is returned with the flag, the figures and a warning;
+      and the pattern is returned with the flag and the figures (``hopeless_reason``;
+      no warning of its own: the operator warns on EL / EA with the user's threshold);
     - the outline correction runs at most `OUTLINE_ROUNDS` rounds of `OUTLINE_ITERS`
       iterations and stops when the defects stop going down (`_correct_outline`).
     """
@@ -1162,9 +1163,11 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     hopeless = EL > HOPELESS_EL or EA > HOPELESS_EA
     reason = ""
     if hopeless:
-        reason = (f"after relaxation EL {100 * EL:.1f} % / EA {100 * EA:.1f} % (limits {100 * HOPELESS_EL:g} / "
-                  f"{100 * HOPELESS_EA:g} %); angle deficit {deficit:.2f} rad, angle excess {excess:.2f} rad")
-        warnings.append(f"the patch cannot lie flat in one piece ({reason}): the overlap correction was skipped")
+        # no warning here: the operator warns on EL / EA with the user's threshold and
+        # gives the advice; the flag and this text say why the correction was skipped
+        reason = (f"after relaxation EL {100 * EL:.1f} % / EA {100 * EA:.1f} % (more than {100 * HOPELESS_EL:g} % / "
+                  f"{100 * HOPELESS_EA:g} %); angle deficit {deficit:.2f} rad, angle excess {excess:.2f} rad: "
+                  "the patch cannot lie flat in one piece, the overlap correction was skipped")
     if not hopeless and len(boundary_self_intersections(UV, topo.F)):
         st.stage(0.6, 0.95, "overlap correction")
         UV2, it2, crossings2, term = _correct_outline(UV, springs, topo, progress=st)
