@@ -50,7 +50,8 @@ more than ~78 degrees away from d), or the fitted curve or the new cut strays mo
 than max(3 h, 15 % of the border length) from the border (symmetric Hausdorff
 distance, so a patch that would shrink away is caught too), or the result breaks a rule (the cut leaves the band,
 a patch falls apart or vanishes, a jagged piece of border remains, the cut would
-turn more than the border did; a valid cut that still turns more than 30 % of the
+not turn measurably less than the border (at most 75 % of its turning) or would move
+it less than a tenth of an edge; a valid cut that still turns more than 30 % of the
 border is kept only if no later one does better), we try a planar
 section (S = a plane: for a loop around a limb, or an arc, the least-squares plane of
 the border; for a nearly straight open border, the plane through its line and the
@@ -58,8 +59,20 @@ mean surface normal), then a *smoothed path along the surface*: the zero set of 
 patch indicator diffused on the surface (two MBO steps: implicit heat step, threshold,
 heat step again; a short curve-shortening flow of the border), over a diffusion
 length of 2 mean border edges, or 3.5 or 6 when the shorter one still turns more
-than 30 % of the jagged border (the smoothest valid one is kept).  A border that still cannot be smoothed is left as it is, and the
-report says why.
+than 30 % of the jagged border (the smoothest valid one is kept); the diffusion runs
+on the faces of the two patches within 2 R + 6 sigma of the border only (R: the band).
+A border that still cannot be smoothed is left as it is, and the report says why.
+
+Idempotent (issue 9): a border is "already smooth", and left as it is, when its
+vertices lie within a tenth of its mean edge of the curve (or plane section across the
+surface) fitted to them, or when the cuts we can make are valid but not measurably
+smoother (rules above).  A cut of a|c relabels faces near an a|b|c junction and so
+moves the end of an a|b cut made before it; `smooth_cuts` therefore passes over all
+borders again (up to four passes; a border is tried again only if one of its two
+patches changed since) until a pass changes nothing.  Running it on its own result
+then changes nothing either: same V, F and labels, every border 'unchanged'.  The
+report rows give each input border's turning before, and after on the whole final
+border (its ends included).
 
 Vertices of the input keep their indices; new vertices are appended.  Each vertex
 carries its barycentric weights on an original triangle (``vert_src``,
