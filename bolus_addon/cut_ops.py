@@ -53,9 +53,10 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
     bl_label = "Smooth Cut Lines"
 
     def run(self, context):
-        # the patch faces are the region (SPEC): read the mesh, keep the faces with bolus_patch >= 0
-        whole = mesh_io.read_region(context, whole=True)
-        obj, me = whole.obj, whole.mesh
+        # the region is the patch faces (bolus_patch >= 0), whatever is selected: every check
+        # (NaN, units, manifold, zero area) is on them only
+        obj = mesh_io.active_mesh_object(context)
+        me = obj.data
         if me.shape_keys is not None:
             raise BolusError(
                 f"'{obj.name}' has shape keys; cutting would have to re-shape every key: apply or remove them first"
@@ -63,10 +64,9 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
         poly_labels = mesh_io.read_face_labels(obj, ATTR_PATCH)  # safe in Edit Mode
         if poly_labels is None:
             raise BolusError(f"'{obj.name}' has no '{ATTR_PATCH}' attribute: run Segment into Patches first")
-        inside = poly_labels[whole.tri_poly] >= 0
-        if not inside.any():
+        if not (poly_labels >= 0).any():
             raise BolusError(f"no face of '{obj.name}' belongs to a patch: run Segment into Patches first")
-        region = mesh_io.subregion(whole, inside)
+        region = mesh_io.read_region(context, obj, polys=poly_labels >= 0)
         labels = poly_labels[region.tri_poly]
         topo = MeshTopology(region.V, region.F)
         warnings = region.warnings + check_topology(topo, allow_nonmanifold=False)

@@ -17,7 +17,7 @@ import numpy as np
 
 from .core.errors import BolusError
 
-__all__ = ["Region", "mm_per_unit", "read_region", "subregion", "size_warning", "check_finite", "read_face_labels", "apply_cuts", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "set_seams", "show_colors"]
+__all__ = ["Region", "mm_per_unit", "read_region", "size_warning", "check_finite", "read_face_labels", "apply_cuts", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "set_seams", "show_colors"]
 
 
 def mm_per_unit(scene: bpy.types.Scene) -> float:
@@ -68,11 +68,13 @@ def active_mesh_object(context) -> bpy.types.Object:
     return obj
 
 
-def read_region(context, obj: bpy.types.Object | None = None, whole: bool = False) -> Region:
+def read_region(context, obj: bpy.types.Object | None = None, polys: np.ndarray | None = None) -> Region:
     """Read the region (SPEC: selected faces in Edit Mode, else the whole mesh).
 
-    whole=True reads the whole mesh whatever is selected (for operators that work on
-    the patches, which were already fixed by the region of `segment`)."""
+    polys (p,) bool: these polygons are the region whatever is selected (for operators
+    that work on the patches, which were fixed by the region of `segment`).  Every
+    region is checked here for every operator: NaN/inf coordinates are refused
+    (`check_finite`), a size that says the units are wrong gives a warning (`size_warning`)."""
     obj = active_mesh_object(context) if obj is None else obj
     if obj.mode == "EDIT":
         obj.update_from_editmode()
@@ -83,7 +85,11 @@ def read_region(context, obj: bpy.types.Object | None = None, whole: bool = Fals
     warnings: list[str] = []
     selection_only = False
     region_poly = np.ones(npoly, dtype=bool)
-    if obj.mode == "EDIT" and not whole:
+    if polys is not None:
+        region_poly = np.asarray(polys, dtype=bool)
+        if region_poly.shape != (npoly,) or not region_poly.any():
+            raise BolusError(f"internal error: a region of {region_poly.sum()} of {npoly} polygons")
+    elif obj.mode == "EDIT":
         sel = _get(me.polygons, "select", npoly, bool)
         if sel.any():
             region_poly = sel
@@ -107,7 +113,7 @@ def read_region(context, obj: bpy.types.Object | None = None, whole: bool = Fals
     units = size_warning(V, scale)
     if units:
         warnings.append(units)
-    if not selection_only:
+    if not selection_only and polys is None:
         loose = nv - len(vert_ids)
         if loose:
             warnings.append(f"{loose} loose vertices (in no face) were ignored")
@@ -130,30 +136,6 @@ def read_region(context, obj: bpy.types.Object | None = None, whole: bool = Fals
         selection_only=selection_only,
         warnings=warnings,
         tri_index=np.nonzero(keep)[0],
-    )
-
-
-def subregion(region: Region, tri_mask: np.ndarray) -> Region:
-    """The part of ``region`` made of the triangles in ``tri_mask`` (m,) bool (whole polygons).
-
-    Vertices are renumbered (only those used), the maps back to the mesh kept; the
-    warnings are carried over.
-    """
-    tri_mask = np.asarray(tri_mask, dtype=bool)
-    F = region.F[tri_mask]
-    used, inv = np.unique(F.ravel(), return_inverse=True)
-    tri_poly = region.tri_poly[tri_mask]
-    return Region(
-        obj=region.obj,
-        V=region.V[used],
-        F=inv.reshape(-1, 3).astype(np.int64),
-        vert_ids=region.vert_ids[used],
-        tri_poly=tri_poly,
-        poly_ids=np.unique(tri_poly),
-        mm_per_unit=region.mm_per_unit,
-        selection_only=region.selection_only,
-        warnings=list(region.warnings),
-        tri_index=None if region.tri_index is None else region.tri_index[tri_mask],
     )
 
 
@@ -362,8 +344,8 @@ def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.n
     (`_interpolate_corners`: ``BMLoop/BMFace.copy_from_face_interp`` raise a SystemError
     in Blender 4.2); new edges along a split edge copy that edge's data (seams,
     sharpness, creases); ``label_attr`` (a FACE INT attribute) is set from
-    ``res.labels``.  The region (whole polygons, e.g. `subregion` of the patch faces)
-    must have been read from the mesh as it is; polygons outside it are not touched.
+    ``res.labels``.  The region (e.g. ``read_region(polys=patch faces)``) must have
+    been read from the mesh as it is; polygons outside it are not touched.
     The selection and hidden state follow the region (`_carry_flags`): a new face is
     selected (hidden) iff the polygon it came from was.
     """
