@@ -184,7 +184,8 @@ def size_warning(V: np.ndarray, mm_per_unit_: float) -> str | None:
     size = f"{diag / 1000.0:.4g} m" if diag > MAX_SIZE_MM else f"{diag:.3g} mm"
     kind = "larger than 3 m" if diag > MAX_SIZE_MM else "smaller than 5 mm"
     advice = (
-        f"if the mesh is in {best[1]} (an STL from a planning system is in mm), set Scene > Units > Unit Scale "
+        f"if the mesh is in {best[1]}{' (as STLs from planning systems are)' if best[1] == 'mm' else ''}, "
+        f"set Scene > Units > Unit Scale "
         f"to {best[0]:g} (now {current:g}; then it is {units * best[0] * 1000.0:.3g} mm across), or scale the object"
         if best[0] != current
         else "check the units of the file and scale the object to its real size"
