@@ -364,6 +364,9 @@ def stiffness_laplacian(springs: Springs, n: int):
     return K.tocsc()
 
 
+STOP_EVERY = 25
+
+
 def _factor_cache(springs: Springs, n: int):
     """Factorisation of K + eps I (`stiffness_laplacian`), cached on ``springs`` for its current stiffness."""
     import scipy.sparse as sp
@@ -383,9 +386,9 @@ def _factor_cache(springs: Springs, n: int):
 
 
 def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, F=None, A0=None,
-                flip_weight: float = 0.0, callback=None, memory: int = 12,
+                flip_weight: float = 0.0, callback=None, memory: int = 8,
                 precondition: bool = True, area_weights=None, extra=None, progress=None,
-                deadline: float | None = None) -> tuple[np.ndarray, int, float]:
+                deadline: float | None = None, stop=None) -> tuple[np.ndarray, int, float]:
     """Minimise the spring energy with L-BFGS (two-loop recursion) from UV0 (n,2).
 
     The initial inverse Hessian of the recursion is gamma K^-1, K the springs' Hessian
@@ -395,7 +398,8 @@ def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, 
     cap).  Armijo backtracking line search with a quadratic step estimate (penalty
     terms make the plain halving take ~7 evaluations per iteration).  Stops when the
     energy decreased by less than tol * E over 5 iterations, after max_iter
-    iterations, or at ``deadline`` (a `time.perf_counter()` value).
+    iterations, at ``deadline`` (a `time.perf_counter()` value), or when stop(UV, it) is
+    true (asked every `STOP_EVERY` iterations).
     progress(fraction of max_iter) is called about every 0.5 s.
     Returns (UV, iterations, energy).
     """
@@ -481,6 +485,8 @@ def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, 
         if len(history) > 5 and history[-6] - e <= tol * max(e, 1e-300):
             break
         if e <= 1e-28:
+            break
+        if stop is not None and it % STOP_EVERY == 0 and stop(x, it):
             break
         if progress is not None or deadline is not None:
             now = time.perf_counter()
@@ -859,7 +865,7 @@ def refine_lengths_l1(UV, springs: Springs, face_count: np.ndarray, rounds: int 
             lam = area_balance * springs.rest[:nt].dot(face_count) / A0.sum()
             aw *= lam * np.median(w) / np.median(face_count / np.maximum(res, 1e-3 * springs.rest[:nt]))
         X, it, _ = relax_lbfgs(X, sp_, max_iter=max_iter, tol=1e-6, F=F, A0=A0,
-                               flip_weight=FLIP_WEIGHT * 100.0 if F is not None else 0.0, area_weights=aw, extra=extra,
+                               flip_weight=FLIP_WEIGHT * 10.0 if F is not None else 0.0, area_weights=aw, extra=extra,
                                progress=None if progress is None else (lambda f, k=k: progress((k + f) / rounds)))
         its += it
     return X, its
@@ -867,24 +873,25 @@ def refine_lengths_l1(UV, springs: Springs, face_count: np.ndarray, rounds: int 
 
 FLIP_WEIGHT = 10.0
 LARGE_PATCH = 8000  # triangles: larger patches start from the conformal map
-RELAX_ITERS = 500  # L-BFGS iterations of the relaxation (was 2000)
-RELAX_TOL = 1e-8  # its stop test: relative energy decrease over 5 iterations (was 1e-9)
+RELAX_ITERS = 300  # L-BFGS iterations of the relaxation (was 2000)
+RELAX_TOL = 1e-7  # its stop test: relative energy decrease over 5 iterations (was 1e-9)
 HOPELESS_EL = 0.10  # a pattern this far off after relaxation cannot be rescued by the overlap correction
 HOPELESS_EA = 0.20
+HOPELESS_FAR = 2.0  # EL above HOPELESS_FAR * HOPELESS_EL after 50 iterations: stop relaxing, it is hopeless
 PENALTY_TOL = 1e-6  # stop test of the penalty minimisations (flips, outline): relative decrease over 5 iterations
 FLIP_ITERS = 150  # L-BFGS iterations per flip-correction round (was 300)
 OUTLINE_ROUNDS = 8  # outline correction rounds (the seed's loop; was 16)
-OUTLINE_ITERS = 100  # L-BFGS iterations per outline round (was 300)
-OUTLINE_PATIENCE = 2  # rounds without fewer defects before the outline correction gives up
+OUTLINE_ITERS = 60  # L-BFGS iterations per outline round (was 300)
+OUTLINE_PATIENCE = 1  # rounds without fewer defects before the outline correction gives up
 
 
 def _correct_flips(UV, springs: Springs, topo: MeshTopology, rounds: int = 4, max_iter: int = FLIP_ITERS,
-                   progress=None):
+                   progress=None, weight: float = FLIP_WEIGHT):
     """Overlap correction (4.5.3): push flipped triangles back with a growing penalty.
 
     Returns (UV, iterations, triangles still flipped)."""
     flipped = int(np.count_nonzero(signed_areas(UV, topo.F) <= 0))
-    weight, its = FLIP_WEIGHT, 0
+    its = 0
     best = (flipped, UV)
     for k in range(rounds):
         if flipped == 0:
@@ -1137,28 +1144,43 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     flip_free = not np.count_nonzero(signed_areas(UV, topo.F) <= 0)
 
     st.stage(0.1, 0.35, "relaxing springs")
+
+    far = []
+
+    def far_off(X, it):
+        """Early hopeless test: lengths still HOPELESS_FAR x the EL limit off after a few dozen
+        iterations (a nostril pocket: EL 40-75 %) will not come under the limit."""
+        if it >= 2 * STOP_EVERY and length_area_errors(topo.V, topo.F, X)[0] > HOPELESS_FAR * HOPELESS_EL:
+            far.append(it)
+        return bool(far)
+
     if method == "lbfgs":
         # from a flip-free start the flip penalty (4.5.3) is on from the first step, so the
         # relaxation does not fold the pattern (a nostril pocket folds flat otherwise, and
         # unfolding the fold afterwards took minutes of penalty rounds)
         UV, it, _ = relax_lbfgs(UV, springs, max_iter=max_iter or RELAX_ITERS, tol=RELAX_TOL, progress=st,
                                 F=topo.F if flip_free else None, A0=topo.areas,
-                                flip_weight=FLIP_WEIGHT * 100.0 if flip_free else 0.0)
+                                flip_weight=FLIP_WEIGHT * 10.0 if flip_free else 0.0, stop=far_off)
     else:
         UV, it, _ = relax_explicit(UV, springs, _lumped_masses(topo), max_iter=max_iter or 20000)
     if np.sum(signed_areas(UV, topo.F)) < 0:
         UV[:, 0] = -UV[:, 0]
     st.stage(0.35, 0.45, "correcting flipped triangles")
-    UV, it2, flipped = _correct_flips(UV, springs, topo, progress=st)
+    if far:  # hopeless: one short round with a strong penalty, only to take out the folds
+        UV, it2, flipped = _correct_flips(UV, springs, topo, rounds=1, max_iter=OUTLINE_ITERS, progress=st,
+                                          weight=FLIP_WEIGHT * 100.0)
+    else:
+        UV, it2, flipped = _correct_flips(UV, springs, topo, progress=st)
     it += it2
-    if refine_rounds > 0:
+    if refine_rounds > 0 and not (far and flipped):
         st.stage(0.45, 0.6, "length refinement")
         face_count = topo.edge_face_count.astype(np.float64)
         UV, it2 = refine_lengths_l1(UV, springs, face_count, rounds=refine_rounds,
                                     F=topo.F if flipped == 0 else None, A0=topo.areas, progress=st)
         it += it2
-        UV, it2, flipped = _correct_flips(UV, springs, topo)
-        it += it2
+        if flipped:
+            UV, it2, flipped = _correct_flips(UV, springs, topo)
+            it += it2
     EL, EA = length_area_errors(topo.V, topo.F, UV)
     hopeless = EL > HOPELESS_EL or EA > HOPELESS_EA
     reason = ""
