@@ -882,7 +882,7 @@ PENALTY_TOL = 1e-6  # stop test of the penalty minimisations (flips, outline): r
 FLIP_ITERS = 150  # L-BFGS iterations per flip-correction round (was 300)
 OUTLINE_ROUNDS = 8  # outline correction rounds (the seed's loop; was 16)
 OUTLINE_ITERS = 60  # L-BFGS iterations per outline round (was 300)
-OUTLINE_PATIENCE = 1  # rounds without fewer defects before the outline correction gives up
+OUTLINE_PATIENCE = 2  # rounds without fewer defects before the outline correction gives up
 
 
 def _correct_flips(UV, springs: Springs, topo: MeshTopology, rounds: int = 4, max_iter: int = FLIP_ITERS,
