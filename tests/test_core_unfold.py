@@ -202,3 +202,51 @@ def test_progress_is_reported_inside_long_minimisations():
         unfold_mod.time.perf_counter = real
     assert it >= 5 and len(seen) >= it - 2
     assert all(0 < f <= 1 for f in seen) and seen == sorted(seen)
+
+
+def _pocket(R=6.0, depth=12.0, na=24):
+    """A flat sheet with a deep round pocket (a nostril-like cavity): angle excess at the rim,
+    deficit at the bottom."""
+    from meshgen import ring_surface
+
+    prof = np.concatenate([np.stack([np.linspace(30.0, R, 7), np.zeros(7)], 1),
+                           np.stack([np.full(6, R), -np.linspace(depth / 6, depth, 6)], 1)])
+    V, F, _ = ring_surface(prof, na=na, pole=True)
+    V[-1] = [0.0, 0.0, -depth - 2.0]
+    return V, F
+
+
+def test_pocket_is_hopeless_and_comes_back_without_folds():
+    V, F = _pocket(depth=18.0)
+    u = unfold_patch(V, F)
+    assert u.hopeless and "angle excess" in u.hopeless_reason
+    assert u.angle_excess > np.pi and u.angle_deficit > np.pi
+    assert u.flipped == 0 and u.overlaps == 0  # the relaxation with the flip penalty does not fold it flat
+
+
+def test_relaxation_stops_when_asked():
+    V, F = spherical_cap(100.0, 60.0, 3)
+    topo = MeshTopology(V, F)
+    springs = build_springs(topo)
+    UV0 = initial_unfolding(topo) * 1.3
+    asked = []
+    _, it, _ = relax_lbfgs(UV0, springs, max_iter=500, tol=0.0, stop=lambda X, k: asked.append(k) or k >= 50)
+    assert it == 50 and asked == [25, 50]
+
+
+def test_explicit_integrator_reports_progress():
+    V, F = spherical_cap(100.0, 45.0, 2)
+    topo = MeshTopology(V, F)
+    springs = build_springs(topo)
+    masses = np.bincount(F.ravel(), weights=np.repeat(topo.areas / 3, 3), minlength=topo.n)
+    seen = []
+    clock = iter(range(10**6))
+    import bolus_addon.core.unfold as unfold_mod
+
+    real = unfold_mod.time.perf_counter
+    try:
+        unfold_mod.time.perf_counter = lambda: float(next(clock))
+        relax_explicit(initial_unfolding(topo), springs, masses, max_iter=1000, tol=0.0, progress=seen.append)
+    finally:
+        unfold_mod.time.perf_counter = real
+    assert len(seen) >= 5 and seen == sorted(seen) and 0 < seen[0] and seen[-1] <= 1

@@ -388,7 +388,7 @@ def _factor_cache(springs: Springs, n: int):
 def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, F=None, A0=None,
                 flip_weight: float = 0.0, callback=None, memory: int = 8,
                 precondition: bool = True, area_weights=None, extra=None, progress=None,
-                deadline: float | None = None, stop=None) -> tuple[np.ndarray, int, float]:
+                stop=None) -> tuple[np.ndarray, int, float]:
     """Minimise the spring energy with L-BFGS (two-loop recursion) from UV0 (n,2).
 
     The initial inverse Hessian of the recursion is gamma K^-1, K the springs' Hessian
@@ -398,8 +398,7 @@ def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, 
     cap).  Armijo backtracking line search with a quadratic step estimate (penalty
     terms make the plain halving take ~7 evaluations per iteration).  Stops when the
     energy decreased by less than tol * E over 5 iterations, after max_iter
-    iterations, at ``deadline`` (a `time.perf_counter()` value), or when stop(UV, it) is
-    true (asked every `STOP_EVERY` iterations).
+    iterations, or when stop(UV, it) is true (asked every `STOP_EVERY` iterations).
     progress(fraction of max_iter) is called about every 0.5 s.
     Returns (UV, iterations, energy).
     """
@@ -488,18 +487,16 @@ def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, 
             break
         if stop is not None and it % STOP_EVERY == 0 and stop(x, it):
             break
-        if progress is not None or deadline is not None:
+        if progress is not None:
             now = time.perf_counter()
-            if deadline is not None and now >= deadline:
-                break
-            if progress is not None and now >= t_report:
+            if now >= t_report:
                 progress(it / max_iter)
                 t_report = now + 0.5
     return x, it, float(e)
 
 
 def relax_explicit(UV0, springs: Springs, masses: np.ndarray, max_iter: int = 20000, damping: float = 0.05,
-                   tol: float = 1e-10, callback=None) -> tuple[np.ndarray, int, float]:
+                   tol: float = 1e-10, callback=None, progress=None) -> tuple[np.ndarray, int, float]:
     """The seed's explicit integration (eqs. 3-23..3-27) with masses m_i (eq. 3-24).
 
     v(t+dt) = v + dt a,  x(t+dt) = x + dt v + dt^2/2 a,  a = f / m (eq. 3-25).
@@ -507,6 +504,7 @@ def relax_explicit(UV0, springs: Springs, masses: np.ndarray, max_iter: int = 20
     velocity is multiplied by (1 - damping) each step.  The step is the largest stable
     one for the stiffest spring (dt = 0.5 sqrt(m_min / (c_max * degree))).
     Stops when the relative energy change over 100 steps falls below tol.
+    progress(fraction of max_iter) is called about every 0.5 s.
     """
     n = len(UV0)
     x = np.asarray(UV0, dtype=np.float64).ravel().copy()
@@ -516,6 +514,7 @@ def relax_explicit(UV0, springs: Springs, masses: np.ndarray, max_iter: int = 20
     dt = 0.5 * np.sqrt(masses.min() / (springs.stiffness.max() * max(deg, 1)))
     e_prev, _ = spring_energy(x, springs, n)
     it = 0
+    t_report = time.perf_counter() + 0.5
     for it in range(1, max_iter + 1):
         e, grad = spring_energy(x, springs, n)
         a = -grad / m2
@@ -524,6 +523,9 @@ def relax_explicit(UV0, springs: Springs, masses: np.ndarray, max_iter: int = 20
         if it % 100 == 0:
             if callback is not None:
                 callback(x)
+            if progress is not None and time.perf_counter() >= t_report:
+                progress(it / max_iter)
+                t_report = time.perf_counter() + 0.5
             if abs(e_prev - e) <= tol * max(e, 1e-300) or e < 1e-24:
                 break
             e_prev = e
@@ -872,12 +874,12 @@ def refine_lengths_l1(UV, springs: Springs, face_count: np.ndarray, rounds: int 
 
 
 FLIP_WEIGHT = 10.0
-LARGE_PATCH = 8000  # triangles: larger patches start from the conformal map
 RELAX_ITERS = 300  # L-BFGS iterations of the relaxation (was 2000)
 RELAX_TOL = 1e-7  # its stop test: relative energy decrease over 5 iterations (was 1e-9)
 HOPELESS_EL = 0.10  # a pattern this far off after relaxation cannot be rescued by the overlap correction
 HOPELESS_EA = 0.20
 HOPELESS_FAR = 2.0  # EL above HOPELESS_FAR * HOPELESS_EL after 50 iterations: stop relaxing, it is hopeless
+HOPELESS_STALL = 0.02  # or above HOPELESS_EL and less than 2 % (relative) better over 25 iterations
 PENALTY_TOL = 1e-6  # stop test of the penalty minimisations (flips, outline): relative decrease over 5 iterations
 FLIP_ITERS = 150  # L-BFGS iterations per flip-correction round (was 300)
 OUTLINE_ROUNDS = 8  # outline correction rounds (the seed's loop; was 16)
@@ -1091,17 +1093,24 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     "relaxing springs", "length refinement", "overlap correction round k/n") and about
     every 0.5 s inside them.
 
+    start: "auto" (= "conformal") starts from `conformal_unfolding`, "greedy" from the
+    coordinate transformation of 4.5.1 (`initial_unfolding`; if that folds over, the
+    conformal map is used and a warning says so).
+
     Speed (issue 9; the stages of the seed are kept, their budgets are ours):
-    - patches above `LARGE_PATCH` triangles start from the conformal map (one sparse
-      solve) instead of the stripe walk of 4.5.1, which on such patches costs seconds
-      of Python and tends to fold over (then the conformal start was tried anyway);
-    - the relaxation stops at `RELAX_ITERS` iterations or a relative energy decrease
-      below `RELAX_TOL` over 5 iterations; the penalty minimisations at `PENALTY_TOL`;
-    - hopeless patches (``hopeless``) are told early: after the length refinement, a
-      pattern with EL > `HOPELESS_EL` or EA > `HOPELESS_EA` cannot be rescued by the
-      overlap correction (it only moves the outline), so that correction is skipped
-      and the pattern is returned with the flag and the figures (``hopeless_reason``;
-      no warning of its own: the operator warns on EL / EA with the user's threshold);
+    - the conformal start is one sparse solve; 4.5.1 reaches the same minimum where it
+      does not fold, but folded on 6 of 8 scanned nose patches and costs seconds of
+      Python on 20k-triangle patches;
+    - the relaxation has the flip penalty on from its first step (the start is flip
+      free), stops at `RELAX_ITERS` iterations or a relative energy decrease below
+      `RELAX_TOL` over 5 iterations; the penalty minimisations at `PENALTY_TOL`;
+    - hopeless patches (``hopeless``) are told early: a relaxation whose EL is still above
+      `HOPELESS_FAR` x `HOPELESS_EL` after 50 iterations is stopped (a nostril pocket)
+      and gets one short flip round; after the length refinement, a pattern with
+      EL > `HOPELESS_EL` or EA > `HOPELESS_EA` cannot be rescued by the overlap
+      correction (it only moves the outline), so that correction is skipped and the
+      pattern is returned with the flag and the figures (``hopeless_reason``; no warning
+      of its own: the operator warns on EL / EA with the user's threshold);
     - the outline correction runs at most `OUTLINE_ROUNDS` rounds of `OUTLINE_ITERS`
       iterations and stops when the defects stop going down (`_correct_outline`).
     """
@@ -1145,13 +1154,19 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
 
     st.stage(0.1, 0.35, "relaxing springs")
 
-    far = []
+    far: list[int] = []
+    el_seen: list[float] = []
 
     def far_off(X, it):
-        """Early hopeless test: lengths still HOPELESS_FAR x the EL limit off after a few dozen
-        iterations (a nostril pocket: EL 40-75 %) will not come under the limit."""
-        if it >= 2 * STOP_EVERY and length_area_errors(topo.V, topo.F, X)[0] > HOPELESS_FAR * HOPELESS_EL:
+        """Early hopeless test, every STOP_EVERY iterations: lengths still HOPELESS_FAR x the EL
+        limit off after 50 iterations (a nostril pocket: EL 40-75 %), or above the limit and
+        less than `HOPELESS_STALL` better than STOP_EVERY iterations before, will not come
+        under the limit (and a long penalised relaxation starts to push triangles over)."""
+        el = length_area_errors(topo.V, topo.F, X)[0]
+        stalled = bool(el_seen) and el > HOPELESS_EL and el > (1.0 - HOPELESS_STALL) * el_seen[-1]
+        if it >= 2 * STOP_EVERY and (el > HOPELESS_FAR * HOPELESS_EL or stalled):
             far.append(it)
+        el_seen.append(el)
         return bool(far)
 
     if method == "lbfgs":
@@ -1162,7 +1177,7 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
                                 F=topo.F if flip_free else None, A0=topo.areas,
                                 flip_weight=FLIP_WEIGHT * 10.0 if flip_free else 0.0, stop=far_off)
     else:
-        UV, it, _ = relax_explicit(UV, springs, _lumped_masses(topo), max_iter=max_iter or 20000)
+        UV, it, _ = relax_explicit(UV, springs, _lumped_masses(topo), max_iter=max_iter or 20000, progress=st)
     if np.sum(signed_areas(UV, topo.F)) < 0:
         UV[:, 0] = -UV[:, 0]
     st.stage(0.35, 0.45, "correcting flipped triangles")
