@@ -60,9 +60,29 @@ def test_zip_holds_the_addon_and_no_dev_files(built_zip):
     # every module of the package is there (4.2's `paths` would have dropped folder contents)
     for py in (ROOT / "bolus_addon").rglob("*.py"):
         assert py.relative_to(ROOT).as_posix() in names
-    for banned in ("tests/", "bench/", "scripts/", "assets/", ".ci/", "docs/", ".venv", "Makefile",
+    for banned in ("tests/", "bench/", "scripts/", "assets/", ".ci/", "docs/", "dist/", "build/", ".venv", "Makefile",
                    "requirements", "pyproject.toml", "__pycache__"):
         assert not any(n.startswith(banned) or f"/{banned}" in n for n in names), f"{banned} leaked into the zip"
+
+
+def test_manifest_keeps_every_generated_folder_out_of_the_zip():
+    """What the repository ignores (venvs, out/, and dist/ and build/ of `make extension-wheels`:
+    hundreds of MB of zips and wheels) is excluded by the builder's own pattern matcher."""
+    import importlib.util
+    import tomllib
+
+    spec = importlib.util.spec_from_file_location("blender_ext_cli", blender_ext_cli())
+    cli = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cli)
+    manifest = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
+    match = cli.PathPatternMatch(manifest["build"]["paths_exclude_pattern"])
+    ignored = [ln.strip() for ln in (ROOT / ".gitignore").read_text().splitlines() if ln.strip()
+               and not ln.startswith("#")]
+    probes = [g.replace("*", "x") for g in ignored] + ["dist/", "build/", "out/", ".venv52/", ".venv45/"]
+    kept = [p for p in probes if not match.test_path(p.lstrip("/"))]
+    assert not kept, f"paths_exclude_pattern lets these into the extension zip: {kept}"
+    for needed in ("bolus_addon/", "bolus_addon/core/unfold.py", "__init__.py", "LICENSE"):
+        assert not match.test_path(needed), needed
 
 
 def install_and_run(python: Path | str, zip_path: Path, user: Path) -> dict:
@@ -77,21 +97,31 @@ def check_installed_run(res: dict, user: Path) -> None:
     assert not problems, (problems, res)
 
 
-def test_blender_installs_the_zip_and_runs_segment_and_unfold(built_zip, tmp_path):
-    """Install from Disk into the running Blender's version, then segment and unfold."""
-    res = install_and_run(sys.executable, built_zip, tmp_path)
-    assert res["bpy"].startswith(running_bpy_version()), res
-    check_installed_run(res, tmp_path)
+def blenders():
+    """The Blenders the zip is installed into: the running one, and bpy 5.2.3 (Python 3.13,
+    numpy 2; the Blender most people download today) unless that is the running one."""
+    out = [pytest.param("running", id="running")]
+    if Path(sys.prefix).resolve() != PY52.parent.parent.resolve():
+        out.append(pytest.param("bpy-5.2.3", id="bpy-5.2.3"))
+    return out
 
 
-def test_blender_5_2_installs_the_zip_and_runs_segment_and_unfold(built_zip, tmp_path):
-    """The same in bpy 5.2.3 (Python 3.13, numpy 2), the Blender most people download today."""
+def blender_python(which: str) -> str:
+    if which == "running":
+        return sys.executable
     if not PY52.exists():
         pytest.skip(".venv52 (bpy 5.2.3) does not exist: `make .venv52/.installed` needs a Python 3.13")
-    if Path(sys.prefix).resolve() == PY52.parent.parent.resolve():
-        pytest.skip("this run is bpy 5.2.3 itself: test_blender_installs_the_zip_and_runs_segment_and_unfold")
-    res = install_and_run(PY52, built_zip, tmp_path)
-    assert res["bpy"].startswith("5.2") and res["python"] == "3.13" and res["numpy"].startswith("2."), res
+    return str(PY52)
+
+
+@pytest.mark.parametrize("which", blenders())
+def test_blender_installs_the_zip_and_runs_segment_and_unfold(built_zip, tmp_path, which):
+    """Install from Disk into a throw-away user folder, then segment and unfold through the installed copy."""
+    res = install_and_run(blender_python(which), built_zip, tmp_path)
+    if which == "running":
+        assert res["bpy"].startswith(running_bpy_version()), res
+    else:
+        assert res["bpy"].startswith("5.2") and res["python"] == "3.13" and res["numpy"].startswith("2."), res
     check_installed_run(res, tmp_path)
 
 
@@ -148,17 +178,11 @@ print("RESULT " + json.dumps(out))
 """
 
 
-@pytest.mark.parametrize("python", ["running", "bpy-5.2.3"])
-def test_blender_installs_the_wheels_of_its_own_python(tmp_path, python):
+@pytest.mark.parametrize("which", blenders())
+def test_blender_installs_the_wheels_of_its_own_python(tmp_path, which):
     """An extension carrying cp311 and cp313 wheels versioned like our scipy / scikit-learn pins:
-    the running Blender (4.2.0 too, which does not look at the Python tag) installs its own."""
-    exe = sys.executable
-    if python == "bpy-5.2.3":
-        if not PY52.exists():
-            pytest.skip(".venv52 (bpy 5.2.3) does not exist: `make .venv52/.installed` needs a Python 3.13")
-        if Path(sys.prefix).resolve() == PY52.parent.parent.resolve():
-            pytest.skip("this run is bpy 5.2.3 itself: the [running] case")
-        exe = str(PY52)
+    the Blender (4.2.0 too, which does not look at the Python tag) installs its own."""
+    exe = blender_python(which)
     pins = build_extension.check_pins()
     src = tmp_path / "src"
     (src / "wheels").mkdir(parents=True)
