@@ -157,7 +157,8 @@ def probe_wheel(folder: Path, dist: str, version: str, tag: str) -> str:
     info = f"{dist}-{version}.dist-info"
     files = {f"{dist}/__init__.py": f"TAG = {tag!r}\nVERSION = {version!r}\n",
              f"{info}/METADATA": f"Metadata-Version: 2.1\nName: {dist}\nVersion: {version}\n",
-             f"{info}/WHEEL": f"Wheel-Version: 1.0\nGenerator: bolus-test\nRoot-Is-Purelib: false\nTag: {tag}-{tag}-any\n"}
+             f"{info}/WHEEL": "Wheel-Version: 1.0\nGenerator: bolus-test\nRoot-Is-Purelib: false\n"
+                              f"Tag: {tag}-{tag}-any\n"}
     record = "".join(f"{k},,\n" for k in files) + f"{info}/RECORD,,\n"
     with zipfile.ZipFile(folder / name, "w") as z:
         for k, text in files.items():
