@@ -250,3 +250,18 @@ def test_explicit_integrator_reports_progress():
     finally:
         unfold_mod.time.perf_counter = real
     assert len(seen) >= 5 and seen == sorted(seen) and 0 < seen[0] and seen[-1] <= 1
+
+
+def test_a_local_fold_is_untangled_without_a_global_round():
+    from bolus_addon.core.unfold import _untangle
+
+    V, F = grid(20, 20)
+    topo = MeshTopology(V, F)
+    UV = V[:, :2].copy()
+    v = 10 * 21 + 10  # an interior vertex pushed far across its neighbours: a fold
+    UV[v] += [12.0, 9.0]
+    assert np.count_nonzero(signed_areas(UV, F) <= 0) > 0
+    X, flips = _untangle(UV, topo)
+    assert flips == 0 and np.count_nonzero(signed_areas(X, F) <= 0) == 0
+    far = np.linalg.norm(V[:, :2] - V[v, :2], axis=1) > 30.0
+    np.testing.assert_array_equal(X[far], UV[far])  # only the neighbourhood of the fold moved

@@ -880,11 +880,40 @@ HOPELESS_EL = 0.10  # a pattern this far off after relaxation cannot be rescued 
 HOPELESS_EA = 0.20
 HOPELESS_FAR = 2.0  # EL above HOPELESS_FAR * HOPELESS_EL after 50 iterations: stop relaxing, it is hopeless
 HOPELESS_STALL = 0.02  # or above HOPELESS_EL and less than 2 % (relative) better over 25 iterations
+UNTANGLE_SWEEPS = 50  # Laplacian sweeps of `_untangle`
 PENALTY_TOL = 1e-6  # stop test of the penalty minimisations (flips, outline): relative decrease over 5 iterations
 FLIP_ITERS = 150  # L-BFGS iterations per flip-correction round (was 300)
 OUTLINE_ROUNDS = 8  # outline correction rounds (the seed's loop; was 16)
 OUTLINE_ITERS = 60  # L-BFGS iterations per outline round (was 300)
+OUTLINE_BIG = 10000  # triangles: larger patches get proportionally fewer outline rounds
 OUTLINE_PATIENCE = 2  # rounds without fewer defects before the outline correction gives up
+
+
+def _untangle(UV, topo: MeshTopology, sweeps: int = UNTANGLE_SWEEPS) -> tuple[np.ndarray, int]:
+    """Local untangling before the penalty rounds (our addition to 4.5.3): the vertices of
+    flipped triangles and their one-ring are moved to the mean of their neighbours
+    (uniform Laplacian), a few sweeps.  A fold of a few triangles on a 40k-triangle patch
+    otherwise costs whole L-BFGS rounds over every vertex.  Returns (UV, flipped); UV is
+    unchanged if the sweeps did not lower the flip count."""
+    F = topo.F
+    flips0 = int(np.count_nonzero(signed_areas(UV, F) <= 0))
+    if flips0 == 0:
+        return UV, 0
+    A = topo.vertex_adjacency
+    deg = np.maximum(np.asarray(A.sum(axis=1)).ravel(), 1.0)
+    X = UV.copy()
+    flips = flips0
+    for _ in range(sweeps):
+        bad = signed_areas(X, F) <= 0
+        flips = int(np.count_nonzero(bad))
+        if flips == 0:
+            break
+        sel = np.zeros(topo.n, dtype=bool)
+        sel[F[bad].ravel()] = True
+        sel |= np.asarray(A @ sel.astype(np.float64)).ravel() > 0
+        X[sel] = (A @ X)[sel] / deg[sel, None]
+    flips = int(np.count_nonzero(signed_areas(X, F) <= 0))
+    return (X, flips) if flips < flips0 else (UV, flips0)
 
 
 def _correct_flips(UV, springs: Springs, topo: MeshTopology, rounds: int = 4, max_iter: int = FLIP_ITERS,
@@ -898,6 +927,15 @@ def _correct_flips(UV, springs: Springs, topo: MeshTopology, rounds: int = 4, ma
     for k in range(rounds):
         if flipped == 0:
             break
+        UV, flipped = _untangle(UV, topo)
+        if flipped == 0:  # the lengths around the fold were smoothed: relax them back, folds kept out
+            UV, it, _ = relax_lbfgs(UV, springs, max_iter=OUTLINE_ITERS, tol=PENALTY_TOL, F=topo.F, A0=topo.areas,
+                                    flip_weight=max(weight, FLIP_WEIGHT * 100.0))
+            its += it
+            flipped = int(np.count_nonzero(signed_areas(UV, topo.F) <= 0))
+            if flipped == 0:
+                best = (0, UV)
+                break
         sub = None if progress is None else (lambda f, k=k: progress((k + f) / rounds))
         UV, it, _ = relax_lbfgs(UV, springs, max_iter=max_iter, tol=PENALTY_TOL, F=topo.F, A0=topo.areas,
                                 flip_weight=weight, progress=sub)
@@ -1207,7 +1245,9 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
                   "the patch cannot lie flat in one piece, the overlap correction was skipped")
     if not hopeless and len(boundary_self_intersections(UV, topo.F)):
         st.stage(0.6, 0.95, "overlap correction")
-        UV2, it2, crossings2, term = _correct_outline(UV, springs, topo, progress=st)
+        # big patches: fewer rounds (each costs ~m), at least 2 (OUTLINE_BIG triangles: all rounds)
+        rounds = max(2, min(OUTLINE_ROUNDS, OUTLINE_ROUNDS * OUTLINE_BIG // topo.m))
+        UV2, it2, crossings2, term = _correct_outline(UV, springs, topo, rounds=rounds, progress=st)
         it += it2
         if refine_rounds > 0 and term is not None:
             # the correction relaxed the plain spring energy: refine again, outline kept apart
