@@ -1260,6 +1260,8 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         if _defects(UV2, topo.F) <= _defects(UV, topo.F):
             UV = UV2
             flipped = int(np.count_nonzero(signed_areas(UV, topo.F) <= 0))
+    if flipped:  # last resort, no relaxation after it: smooth the few folds left away locally
+        UV, flipped = _untangle(UV, topo)
     e, _ = spring_energy(UV.ravel(), springs, topo.n)
     if flipped:
         warnings.append(f"{flipped} triangles remain flipped after the overlap correction")
