@@ -68,7 +68,7 @@ vertices lie within a tenth of its mean edge of the curve (or plane section acro
 surface) fitted to them, or when the cuts we can make are valid but not measurably
 smoother (rules above).  A cut of a|c relabels faces near an a|b|c junction and so
 moves the end of an a|b cut made before it; `smooth_cuts` therefore passes over all
-borders again (up to four passes; a border is tried again only if one of its two
+borders again (up to six passes; a border is tried again only if one of its two
 patches changed since) until a pass changes nothing.  Running it on its own result
 then changes nothing either: same V, F and labels, every border 'unchanged'.  The
 report rows give each input border's turning before, and after on the whole final
@@ -123,7 +123,7 @@ SMOOTH_ENOUGH = 0.3  #: a smoothed path is accepted at once when it turns <= 30 
 MIN_GAIN = 0.25  #: a cut must turn at most (1 - MIN_GAIN) of the border to be worth making
 MIN_SHIFT = 0.1  #: a cut moving the border less than this fraction of its mean edge is the same border
 ON_CURVE = 0.1  #: border vertices within this fraction of the mean edge of their fitted curve: already that curve
-MAX_PASSES = 4  #: passes over all borders until one changes nothing (a later cut moves the ends of earlier ones)
+MAX_PASSES = 6  #: passes over all borders until one changes nothing (a later cut moves the ends of earlier ones)
 
 
 # ---------------------------------------------------------------- borders
