@@ -399,7 +399,8 @@ def nose_region(patches, radius=45.0):
     near_tip = keep[np.argmin(np.linalg.norm(centroids(V, F[keep]) - tip, axis=1))]
     region = keep[comp == comp[np.searchsorted(keep, near_tip)]]
     ids, inv = np.unique(F[region], return_inverse=True)
-    seg = segment(V[ids], inv.reshape(-1, 3), patches=patches, eta=5.0, smoothing_mm=3.0, rng=0, face_groups=poly[region])
+    seg = segment(V[ids], inv.reshape(-1, 3), patches=patches, eta=5.0, smoothing_mm=3.0, rng=0,
+                  face_groups=poly[region])
     labels = np.full(len(F), -1)
     labels[region] = seg.face_labels
     return V, F, labels
@@ -428,7 +429,8 @@ def test_second_run_changes_nothing_on_synthetic_meshes(case):
     elif case == "three patches":
         V, F = grid(30, 30, size=100.0, jitter=0.2)
         c = centroids(V, F)
-        labels = np.where(c[:, 0] + 3 * np.sin(c[:, 1] / 7) < 40, 0, np.where(c[:, 1] + 2 * np.cos(c[:, 0] / 5) < 50, 1, 2))
+        upper = np.where(c[:, 1] + 2 * np.cos(c[:, 0] / 5) < 50, 1, 2)
+        labels = np.where(c[:, 0] + 3 * np.sin(c[:, 1] / 7) < 40, 0, upper)
     else:
         V, F, _ = sheet()
         c = centroids(V, F)

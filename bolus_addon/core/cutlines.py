@@ -595,7 +595,8 @@ def _split_faces(st: _State, bf: np.ndarray, phi: np.ndarray, ce: np.ndarray, t:
     side_key = np.minimum(u, v) * n + np.maximum(u, v)
     pos = np.clip(np.searchsorted(ce_key[order], side_key), 0, max(len(ce) - 1, 0))
     hit = (ce_key[order][pos] == side_key) if len(ce) else np.zeros(side_key.shape, dtype=bool)
-    xs = np.where(hit, n + order[pos], -1) if len(ce) else np.full(side_key.shape, -1)  # (len(bf), 3) new vertex per side
+    # (len(bf), 3): the new vertex on each side of each band face, -1 if none
+    xs = np.where(hit, n + order[pos], -1) if len(ce) else np.full(side_key.shape, -1)
     # parent triangle of each crossing edge: the first band face that has it
     fi, _ = np.nonzero(hit)
     jj = xs[hit] - n
@@ -987,7 +988,8 @@ def smooth_cuts(V, F, labels, snap: float = SNAP, progress=None) -> SmoothCutRes
     tracks: list[_Track] = []
     memo: dict = {"seen": {}, "version": {}}
     for pass_no in range(MAX_PASSES):
-        lo, hi = (0.0, 0.75) if pass_no == 0 else (0.75 + 0.2 * (1 - 0.5 ** (pass_no - 1)), 0.75 + 0.2 * (1 - 0.5**pass_no))
+        lo = 0.0 if pass_no == 0 else 0.75 + 0.2 * (1 - 0.5 ** (pass_no - 1))
+        hi = 0.75 if pass_no == 0 else 0.75 + 0.2 * (1 - 0.5**pass_no)
         st, changed = _one_pass(st, snap, tracks, pass_no, memo, lambda f, t: report(lo + (hi - lo) * f, t))
         if not changed:
             break
@@ -1047,7 +1049,8 @@ def _one_pass(st: _State, snap: float, tracks: list[_Track], pass_no: int, memo:
         # borders of this pair on the current mesh (earlier cuts may have moved junctions)
         fresh = _pair_borders(st, a, b)
         for bd in list(fresh):
-            report(done / max(total, 1), f"cut between patches {a} and {b}" + (f" (pass {pass_no + 1})" if pass_no else ""))
+            text = f"cut between patches {a} and {b}" + (f" (pass {pass_no + 1})" if pass_no else "")
+            report(done / max(total, 1), text)
             if last is not None and last.method != "unchanged" and (last.a, last.b) == (a, b):
                 fresh = _pair_borders(st, a, b)  # the last cut moved things
             # the same border on the current mesh (its edges are unchanged: other pairs' cuts
