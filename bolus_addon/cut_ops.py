@@ -66,14 +66,21 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
             raise BolusError(f"'{obj.name}' has no '{ATTR_PATCH}' attribute: run Segment into Patches first")
         if not (poly_labels >= 0).any():
             raise BolusError(f"no face of '{obj.name}' belongs to a patch: run Segment into Patches first")
-        region = mesh_io.read_region(context, obj, polys=poly_labels >= 0)
+        # The core also gets the faces just outside the patches (label -1, never split): a
+        # cut that reaches the edge of the region then snaps to a vertex there instead of
+        # splitting an edge that a face outside the region shares (a T-junction, a crack).
+        patch = poly_labels >= 0
+        region = mesh_io.read_region(context, obj, polys=patch | mesh_io.polygons_next_to(me, patch))
         labels = poly_labels[region.tri_poly]
-        topo = MeshTopology(region.V, region.F)
+        inside = labels >= 0
+        used, local = np.unique(region.F[inside], return_inverse=True)
+        topo = MeshTopology(region.V[used], local.reshape(-1, 3))  # the checks: on the patch faces only
         warnings = region.warnings + check_topology(topo, allow_nonmanifold=False)
         pairs = topo.face_adjacency_pairs
-        if len(np.unique(labels)) < 2 or not (labels[pairs[:, 0]] != labels[pairs[:, 1]]).any():
+        inner = labels[inside]
+        if len(np.unique(inner)) < 2 or not (inner[pairs[:, 0]] != inner[pairs[:, 1]]).any():
             self.warn_all(warnings)
-            why = ("there is only one patch" if len(np.unique(labels)) < 2 else "the patches do not share any border")
+            why = ("there is only one patch" if len(np.unique(inner)) < 2 else "the patches do not share any border")
             self.report({"INFO"}, f"Nothing to smooth on '{obj.name}': {why} (Segment into Patches with 2 or more "
                                   "patches makes borders to smooth); the mesh was not changed")
             return {"FINISHED"}

@@ -17,7 +17,7 @@ import numpy as np
 
 from .core.errors import BolusError
 
-__all__ = ["Region", "mm_per_unit", "read_region", "size_warning", "check_finite", "read_face_labels", "apply_cuts", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "set_seams", "show_colors"]
+__all__ = ["Region", "mm_per_unit", "read_region", "size_warning", "check_finite", "read_face_labels", "apply_cuts", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "polygons_next_to", "set_seams", "show_colors"]
 
 
 def mm_per_unit(scene: bpy.types.Scene) -> float:
@@ -284,6 +284,16 @@ def edges_of_polygons(me: bpy.types.Mesh, poly_ids: np.ndarray) -> np.ndarray:
     out = np.zeros(len(me.edges), dtype=bool)
     out[loop_e[mark[loop_p]]] = True
     return out
+
+
+def polygons_next_to(me: bpy.types.Mesh, mask: np.ndarray) -> np.ndarray:
+    """(p,) bool: the polygons outside ``mask`` (p,) that share an edge with a polygon in it."""
+    loop_e, loop_p = _loop_edges_and_polygons(me)
+    edge_in = np.zeros(len(me.edges), dtype=bool)
+    edge_in[loop_e[mask[loop_p]]] = True
+    out = np.zeros(len(me.polygons), dtype=bool)
+    out[loop_p[edge_in[loop_e]]] = True
+    return out & ~mask
 
 
 def set_seams(me: bpy.types.Mesh, seam: np.ndarray, touched: np.ndarray) -> None:

@@ -646,6 +646,31 @@ def test_selection_follows_the_region_in_edit_mode(bpy_addon, scene):
     assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
 
 
+def test_no_crack_where_a_cut_meets_the_edge_of_the_region(bpy_addon, scene):
+    """A border running to the edge of an Edit Mode region ends on a vertex there: no edge that a
+    face outside the region shares is split on one side only (a T-junction: the surface would
+    get a crack, seen as new boundary edges inside the grid)."""
+    bpy = bpy_addon
+    ob, region = bumpy_region_grid(bpy)
+    me = ob.data
+
+    def boundary_edges():
+        le, _ = loop_edges_polys(me)
+        return int((np.bincount(le, minlength=len(me.edges)) == 1).sum())
+
+    before = boundary_edges()
+    assert before == 4 * 40  # the grid's own outline
+    enter_edit_mode_with_faces(bpy, ob, region)
+    assert bpy.ops.bolus.segment(patches=3) == {"FINISHED"}
+    n0 = len(me.vertices)
+    assert bpy.ops.bolus.smooth_cuts() == {"FINISHED"}
+    bpy.ops.object.mode_set(mode="OBJECT")
+    assert len(me.vertices) > n0  # it did cut
+    assert boundary_edges() == before
+    le, _ = loop_edges_polys(me)
+    assert np.bincount(le, minlength=len(me.edges)).max() == 2  # and no edge got three faces
+
+
 @pytest.mark.parametrize("mode", ["OBJECT", "EDIT"])
 def test_selection_and_hiding_follow_each_polygon(bpy_addon, scene, mode):
     """Every face after the cut lies in one old quad: it is selected (hidden) iff that quad was."""
