@@ -159,12 +159,14 @@ def render_closeup(obj: bpy.types.Object, color_attribute: str, path: Path) -> N
     cam.location, cam.data.ortho_scale = old
 
 
-def render_pattern(face: bpy.types.Object, pattern: bpy.types.Object, path: Path) -> None:
+def render_pattern(pattern: bpy.types.Object, path: Path) -> None:
     """Top view of the pattern alone, coloured by area distortion (blue shrunk, red stretched)."""
     from bolus_addon.mesh_io import show_colors
 
     scene = bpy.context.scene
-    face.hide_render = True
+    others = [ob for ob in scene.objects if ob is not pattern and ob.type == "MESH" and not ob.hide_render]
+    for ob in others:  # the face, and the print parts that also lie on z = 0
+        ob.hide_render = True
     show_colors(pattern.data, "bolus_area_distortion")
     co = np.array([v.co for v in pattern.data.vertices])
     lo, hi = co.min(axis=0), co.max(axis=0)
@@ -181,7 +183,8 @@ def render_pattern(face: bpy.types.Object, pattern: bpy.types.Object, path: Path
     bpy.ops.render.render(write_still=True)
     scene.display.shading.light = "STUDIO"
     cam.location, cam.rotation_euler, cam.data.ortho_scale = old
-    face.hide_render = False
+    for ob in others:
+        ob.hide_render = False
 
 
 def render_parts(hide: list, parts: list, path: Path) -> None:
@@ -343,7 +346,7 @@ def main():
     (out / "report.txt").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
-    render_pattern(obj, pattern, out / "pattern.png")
+    render_pattern(pattern, out / "pattern.png")
     render_parts([obj, pattern], parts, out / "parts.png")
     bpy.ops.wm.save_as_mainfile(filepath=str((out / "demo.blend").resolve()))
     print(f"wrote {out}/demo.blend, saliency.png, patches.png, cuts.png, cuts_before.png, cuts_after.png, pattern.png, parts.png, pattern.svg, parts/*.stl, report.json, report.txt")
