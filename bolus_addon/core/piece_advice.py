@@ -106,8 +106,9 @@ DEFICIT_ADVICE = (
     "smaller patches, or cut a dart from the edge towards its most curved point"
 )
 EXCESS_ADVICE = (
-    "the skin here has more angle than a flat sheet (angle excess {X:.2f} rad, deficit {D:.2f} rad: "
-    "a pocket rim, groove or fold, where the sheet would overlap), so a dart would overlap and more "
+    "parts of the skin here have more angle than a flat sheet (angle excess {X:.2f} rad beside a "
+    "deficit of {D:.2f} rad: a pocket rim, groove or fold, where the sheet would overlap), so a dart "
+    "would overlap and more "
     "patches around a pocket make it worse: leave the cavity out of the treatment area (deselect it "
     "in Edit Mode and segment again), split it into separate pieces along the groove, or use the "
     "printed bolus"
