@@ -152,6 +152,7 @@ def test_hopeless_patch_is_flagged_with_its_figures():
     assert "EL" in u.hopeless_reason and "angle deficit" in u.hopeless_reason
     assert "cannot lie flat" in u.hopeless_reason
     assert u.flipped == 0  # the quick pattern still has no fold
+    assert np.count_nonzero(signed_areas(u.UV, u.F) <= 0) == 0
 
 
 def test_mild_cap_is_not_hopeless():
@@ -222,6 +223,7 @@ def test_pocket_is_hopeless_and_comes_back_without_folds():
     assert u.hopeless and "angle excess" in u.hopeless_reason
     assert u.angle_excess > np.pi and u.angle_deficit > np.pi
     assert u.flipped == 0 and u.overlaps == 0  # the relaxation with the flip penalty does not fold it flat
+    assert np.count_nonzero(signed_areas(u.UV, u.F) <= 0) == u.flipped  # the count is the pattern's
 
 
 def test_relaxation_stops_when_asked():

@@ -1231,8 +1231,9 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         UV, it2 = refine_lengths_l1(UV, springs, face_count, rounds=refine_rounds,
                                     F=topo.F if flipped == 0 else None, A0=topo.areas, progress=st)
         it += it2
+        flipped = int(np.count_nonzero(signed_areas(UV, topo.F) <= 0))
         if flipped:
-            UV, it2, flipped = _correct_flips(UV, springs, topo)
+            UV, it2, flipped = _correct_flips(UV, springs, topo, rounds=1 if far else 4)
             it += it2
     EL, EA = length_area_errors(topo.V, topo.F, UV)
     hopeless = EL > HOPELESS_EL or EA > HOPELESS_EA
