@@ -5,6 +5,7 @@ Run from the repository root:
     .venv/bin/python bench/unfold_bench.py            # full run (about 3-5 minutes)
     .venv/bin/python bench/unfold_bench.py --quick    # smaller caps, no explicit integrator
     .venv/bin/python bench/unfold_bench.py --json out/unfold_bench.json
+    .venv/bin/python bench/unfold_bench.py --quick --only "nose p1" --only nostril   # some patches only
 
 Every benchmark patch is first cut to a disk with ``cutting.cut_to_disk(V, F)``
 (a disk comes back unchanged).  In the same process and with exactly those seams:
@@ -648,6 +649,8 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true",
                     help=f"caps with subdivisions {CAP_SUBDIV_QUICK} instead of {CAP_SUBDIV}; no explicit integrator")
     ap.add_argument("--json", metavar="PATH", help="also write the figures as JSON to PATH")
+    ap.add_argument("--only", metavar="NAME", action="append", default=[],
+                    help="bench only the patches whose name contains NAME (repeatable, e.g. --only 'nose p1')")
     ap.add_argument("--repeat", type=int, default=3,
                     help="timed runs of each L-BFGS variant and Blender method, the best is kept (default 3)")
     ap.add_argument("--explicit-budget", type=float, default=50.0,
@@ -676,6 +679,8 @@ def main(argv=None) -> int:
         bpy.context.scene.unit_settings.scale_length = 0.001  # 1 unit = 1 mm (unwrap does not care)
         warm_up(bpy)
     patches = make_patches(args.quick)
+    if args.only:
+        patches = [p for p in patches if any(o in p["name"] for o in args.only)]
     rows = []
     for patch in patches:
         if "error" in patch:

@@ -267,3 +267,48 @@ def test_a_local_fold_is_untangled_without_a_global_round():
     assert flips == 0 and np.count_nonzero(signed_areas(X, F) <= 0) == 0
     far = np.linalg.norm(V[:, :2] - V[v, :2], axis=1) > 30.0
     np.testing.assert_array_equal(X[far], UV[far])  # only the neighbourhood of the fold moved
+
+
+def test_outline_crossing_is_corrected_locally():
+    """A strip laid on a circle of 1.04 turns: its two ends overlap.  `_local_outline` moves
+    only the vertices near the ends apart; the middle of the strip stays exactly in place."""
+    from bolus_addon.core.overlap import boundary_self_intersections
+    from bolus_addon.core.unfold import _local_outline
+
+    V, F = grid(60, 3, 60.0)
+    V[:, 1] *= 3.0 / 60.0  # a 60 x 3 mm strip
+    topo = MeshTopology(V, F)
+    theta = V[:, 0] / 60.0 * 2.0 * np.pi * 1.04
+    UV = np.stack([(10.0 + V[:, 1]) * np.cos(theta), (10.0 + V[:, 1]) * np.sin(theta)], 1)
+    if signed_areas(UV, F).sum() < 0:
+        UV[:, 0] = -UV[:, 0]
+    assert len(boundary_self_intersections(UV, F)) and overlapping_faces(UV, F).sum() > 0
+    X, _, crossings = _local_outline(UV, build_springs(topo), topo)
+    assert crossings == 0 and len(boundary_self_intersections(X, F)) == 0
+    assert overlapping_faces(X, F).sum() == 0 and np.count_nonzero(signed_areas(X, F) <= 0) == 0
+    middle = np.abs(V[:, 0] - 30.0) < 15.0
+    np.testing.assert_array_equal(X[middle], UV[middle])
+
+
+def test_scanned_nose_patches_unfold_without_overlaps():
+    """The nose patches of the benchmark (ict_face_narrow.obj, bench/unfold_bench.py): the
+    whole-patch outline correction left 4 overlapping triangles on p1 and on p2."""
+    import sys
+    from pathlib import Path
+
+    from conftest import shared_mesh
+
+    shared_mesh("ict_face_narrow.obj")  # skips when the shared meshes are absent
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+    try:
+        import unfold_bench
+    finally:
+        sys.path.pop(0)
+    patches = {p["name"]: p for p in unfold_bench.make_patches(quick=True)
+               if p["name"] in ("nose p1", "nose p2")}
+    assert len(patches) == 2
+    for p in patches.values():
+        u = unfold_patch(p["V"], p["F"])
+        assert u.overlaps == 0 and u.flipped == 0, p["name"]
+        assert int(overlapping_faces(u.UV, u.F).sum()) == 0, p["name"]
+        assert u.EL < 0.045 and u.EA < 0.07, (p["name"], u.EL, u.EA)
