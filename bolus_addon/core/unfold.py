@@ -43,6 +43,14 @@ bench/unfold_bench.py against Blender's SLIM):
 - hopeless patches (EL > `HOPELESS_EL` or EA > `HOPELESS_EA` after relaxation and
   refinement) skip the outline correction and come back at once with
   ``Unfolding.hopeless`` and the figures (angle deficit / excess, eq. 4-1);
+- outline crossings are first corrected locally (`_local_outline`): only the vertices
+  within `LOCAL_RINGS` rings of the crossing outline edges move, with the tension and
+  area springs weighted as in the length refinement, so the refined pattern elsewhere is
+  kept as it is; the whole-patch `_correct_outline` runs only when that fails, and the
+  local correction once more after it.  On the scanned nose patches the whole-patch
+  correction left 4 overlapping triangles (nose p1, p2), 2 on the nostril middle and 12
+  on the 43k face region; with the local one none, and nose p1 went from 2.7x to 1.8x the
+  time of SLIM-100 (EL 3.75 -> 3.92 %, EA 5.89 -> 6.16 %: the outline opened up);
 - progress(fraction, text) is called at every stage and about every 0.5 s inside.
 
 A patch that is not a topological disk is cut to one first (cutting.py).
@@ -1272,8 +1280,11 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
       correction (it only moves the outline), so that correction is skipped and the
       pattern is returned with the flag and the figures (``hopeless_reason``; no warning
       of its own: the operator warns on EL / EA with the user's threshold);
-    - the outline correction runs at most `OUTLINE_ROUNDS` rounds of `OUTLINE_ITERS`
-      iterations and stops when the defects stop going down (`_correct_outline`).
+    - outline crossings are first corrected locally around them (`_local_outline`,
+      `LOCAL_ROUNDS` x `LOCAL_ITERS`); only if crossings or flips remain, the whole-patch
+      outline correction runs at most `OUTLINE_ROUNDS` rounds of `OUTLINE_ITERS`
+      iterations and stops when the defects stop going down (`_correct_outline`),
+      followed by the local correction again.
     """
     t0 = time.perf_counter()
     st = _Stages(progress)
