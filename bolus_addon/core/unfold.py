@@ -49,8 +49,8 @@ bench/unfold_bench.py against Blender's SLIM):
   kept as it is; the whole-patch `_correct_outline` runs only when that fails, and the
   local correction once more after it.  On the scanned nose patches the whole-patch
   correction left 4 overlapping triangles (nose p1, p2), 2 on the nostril middle and 12
-  on the 43k face region; with the local one none, and nose p1 went from 2.7x to 1.8x the
-  time of SLIM-100 (EL 3.75 -> 3.92 %, EA 5.89 -> 6.16 %: the outline opened up);
+  on the 43k face region; with the local one none, and nose p1 went from 2.7x to 1.7x the
+  time of SLIM-100 (EL 3.75 -> 3.90 %, EA 5.89 -> 6.19 %: the outline opened up);
 - progress(fraction, text) is called at every stage and about every 0.5 s inside.
 
 A patch that is not a topological disk is cut to one first (cutting.py).
@@ -1079,7 +1079,8 @@ def _correct_outline(UV, springs: Springs, topo: MeshTopology, rounds: int = OUT
 
 LOCAL_RINGS = 3  # vertex rings around a crossing of the outline that `_local_outline` moves
 LOCAL_ROUNDS = 6  # its rounds (penalty doubled each round)
-LOCAL_ITERS = 60  # L-BFGS iterations per round (a few dozen moving vertices)
+LOCAL_ITERS = 40  # L-BFGS iterations per round (a few dozen moving vertices)
+LOCAL_GROWTH = 2.0  # outline penalty factor from one local round to the next
 LOCAL_FIRST = True  # try `_local_outline` before the whole-patch `_correct_outline`
 IRLS_CLIP = 10.0  # the local solve's IRLS weights stay within this factor of their median
 LOCAL_CROSSED = False  # crossed springs in the local solve (with them: nose p1 EL +0.45 % instead of +0.2 %)
@@ -1173,7 +1174,7 @@ def _local_outline(UV, springs: Springs, topo: MeshTopology, rings: int = LOCAL_
             best = ((flips, len(pairs)), X)
         if not len(pairs) and not flips:
             break
-        weight *= 2.0
+        weight *= LOCAL_GROWTH
     (_, crossings), X = best
     return X, its, crossings
 
