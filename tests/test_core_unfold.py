@@ -351,3 +351,17 @@ def test_crossed_springs_are_in_the_model_and_earn_their_keep(monkeypatch):
     monkeypatch.setattr(unfold, "CROSSED_WEIGHT", 0.0)
     without = unfold.unfold_patch(Vc, Fc, refine_rounds=0).EL
     assert with_crossed < without - 0.0003
+
+
+def test_coincident_vertices_are_refused_by_name():
+    """Two coincident vertices leave zero-area triangles: unfold_patch and analyse refuse them
+    with a BolusError naming a triangle and its vertices (was scipy's 'Factor is exactly
+    singular' from unfold_patch, and a sum varpi of 6.3 rad from analyse on a flat grid)."""
+    from bolus_addon.core.saliency import analyse
+
+    V, F = grid(10, 10, size=100.0)
+    V = V.copy()
+    V[45] = V[46]
+    for call in (lambda: unfold_patch(V, F), lambda: analyse(V, F, 0.0), lambda: analyse(V, F, 3.0)):
+        with pytest.raises(BolusError, match=r"zero-area triangle.*vertices .*45.*46"):
+            call()

@@ -164,6 +164,7 @@ def analyse(V, F, smoothing_mm: float = 0.0, topo: MeshTopology | None = None) -
     topo = MeshTopology(V, F) if topo is None else topo
     if topo.m == 0:
         raise BolusError("the region has no faces")
+    topo.require_nondegenerate("the region")
     Vs = smooth_for_analysis(topo, smoothing_mm)
     theta = corner_angle_sums(Vs, topo)
     varpi = flattenability(topo, theta)

@@ -346,6 +346,20 @@ class MeshTopology:
     def mean_edge_length(self) -> float:
         return float(self.edge_lengths.mean()) if len(self.edges) else 0.0
 
+    def require_nondegenerate(self, what: str = "the mesh") -> None:
+        """Raise BolusError naming the first zero-area triangle (coincident or collinear
+        vertices), the same test as `degenerate_faces`; such a triangle has no angles and
+        no shape, so angle sums (eq. 4-1) and springs (eq. 3-22) are undefined on it."""
+        bad = np.nonzero(self.degenerate_faces())[0]
+        if len(bad):
+            f = int(bad[0])
+            i, j, k = (int(x) for x in self.F[f])
+            raise BolusError(
+                f"{what} has {len(bad)} zero-area triangle(s), e.g. triangle {f} (vertices {i}, {j}, {k}): "
+                "coincident or collinear vertices; merge them first (Mesh > Clean Up > Merge by Distance, "
+                "then Degenerate Dissolve)"
+            )
+
     def degenerate_faces(self, rel_tol: float = 1e-10) -> np.ndarray:
         """(m,) bool: triangles whose area is below rel_tol * (median edge length)^2."""
         if self.m == 0:

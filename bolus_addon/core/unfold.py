@@ -1298,6 +1298,7 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     topo0 = MeshTopology(V, F)
     if float(topo0.areas.sum()) <= 0 or topo0.degenerate_faces().all():
         raise BolusError("the patch has no area to unfold")
+    topo0.require_nondegenerate("the patch")
     # consistent winding: every interior edge is walked once in each direction
     he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
     if len(np.unique(he[:, 0] * topo0.n + he[:, 1])) < len(he):
