@@ -20,6 +20,7 @@ from mathutils import Matrix
 from . import mesh_io
 from .core.colormap import diverging_linear_rgba
 from .core.errors import BolusError
+from .core.overlap import signed_areas
 from .core.pattern_svg import pattern_svg
 from .core.piece_advice import DEFAULT_WARN_FRACTION, piece_advice
 from .core.saliency import DEFAULT_SMOOTHING_MM
@@ -86,11 +87,6 @@ def is_pattern_object(obj) -> bool:
             and (PROP_PATTERN_TABLE in obj or ATTR_SOURCE_FACE in obj.data.attributes))
 
 
-def _signed_area_2d(P: np.ndarray, F: np.ndarray) -> np.ndarray:
-    a, b, c = P[F[:, 0]], P[F[:, 1]], P[F[:, 2]]
-    return 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-
-
 def diagnose_pieces(context, job: _UnfoldJob, rows: list[dict]) -> float:
     """Add to every row its pattern/skin area ratio, its angle excess/deficit and, when
     EL, EA (above ``Scene.bolus.warn_distortion_pct``), flips or overlaps make it a piece
@@ -106,7 +102,7 @@ def diagnose_pieces(context, job: _UnfoldJob, rows: list[dict]) -> float:
         seen[p] = seen.get(p, 0) + 1
         row["name"] = f"patch {p}" + (f" piece {seen[p]}/{pieces_of[p]}" if pieces_of[p] > 1 else "")
         skin = float(face_areas(region.V[u.vert_origin], u.F).sum())
-        row["area_ratio"] = float(_signed_area_2d(u.UV, u.F).sum()) / skin if skin > 0 else 0.0
+        row["area_ratio"] = float(signed_areas(u.UV, u.F).sum()) / skin if skin > 0 else 0.0
         Fk = region.F[job.islands == k]
         used, inv = np.unique(Fk.ravel(), return_inverse=True)
         try:
@@ -230,6 +226,7 @@ def build_pattern_object(context, job: _UnfoldJob) -> bpy.types.Object:
     obj[PROP_PATTERN_TABLE] = json.dumps({"EL": total[0], "EA": total[1], "flipped": total[2], "warn_pct": warn_pct,
                                           "islands": rows})
     job.rows = rows
+    job.warn_pct = warn_pct
     job.total = total
     return obj
 
@@ -285,7 +282,7 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
                                   f"EA {row['EA'] * 100:.3f} %, flipped {row['flipped']}, pattern area "
                                   f"{row['area_ratio']:.3f} of the skin, {row['seconds']:.2f} s")
         bad = [row for row in job.rows if row.get("warn")]
-        warn_pct = json.loads(obj[PROP_PATTERN_TABLE])["warn_pct"]
+        warn_pct = job.warn_pct
         self.warn_all(piece_warning(row, warn_pct) for row in bad)
         if bad:  # last, so the status bar shows it
             self.report({"WARNING"}, f"{len(bad)} of {len(job.rows)} pattern pieces are not fit to cut "
