@@ -105,3 +105,62 @@ def test_bad_arrays_raise_value_error(V, F, msg):
         MeshTopology(V, F)
     with pytest.raises(BolusError):
         MeshTopology(V, F)
+
+
+# ---------------------------------------------------------------- check_mesh / submesh (issue 10)
+def _square():
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    return V, F
+
+
+def test_check_mesh_names_coincident_vertices():
+    from bolus_addon.core.topology import check_mesh
+
+    V, F = _square()
+    V = np.vstack([V, V[2]])  # vertex 4 sits on vertex 2
+    F = np.vstack([F, [1, 2, 4]])
+    with pytest.raises(BolusError, match=r"the patch has 1 zero-area triangle.*triangle 2 \(vertices 1, 2, 4\)"):
+        check_mesh(V, F, "the patch")
+    Vc, Fc = check_mesh(V, F, nondegenerate=False)
+    assert Vc.dtype == np.float64 and Fc.dtype == np.int64
+
+
+def test_check_mesh_names_nan_vertex_and_nonmanifold_edge():
+    from bolus_addon.core.topology import check_mesh
+
+    V, F = _square()
+    Vn = V.copy()
+    Vn[3, 1] = np.inf
+    with pytest.raises(BolusError, match="vertex 3"):
+        check_mesh(Vn, F)
+    V2 = np.vstack([V, [[0.5, 0.5, 1.0]]])
+    F2 = np.vstack([F, [[0, 2, 4]]])  # edge 0-2 now has three triangles
+    check_mesh(V2, F2)  # allowed unless asked
+    with pytest.raises(BolusError, match="non-manifold edge.*vertices 0 and 2"):
+        check_mesh(V2, F2, manifold=True)
+    with pytest.raises(BolusError, match="triangle 1 refers"):
+        check_mesh(V, np.array([[0, 1, 2], [0, 2, 9]]))
+    with pytest.raises(BolusError, match="at least 3"):
+        check_mesh(V, F, min_faces=3)
+
+
+def test_check_mesh_lets_needles_pass():
+    from bolus_addon.core.topology import check_mesh
+
+    V = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1e-4, 0]], dtype=float)  # smallest angle ~0.01 deg
+    Vc, Fc = check_mesh(V, [[0, 1, 2]])
+    assert np.array_equal(Fc, [[0, 1, 2]])
+
+
+def test_submesh_compacts_and_keeps_order():
+    from bolus_addon.core.spectral import submesh as spectral_submesh
+    from bolus_addon.core.topology import submesh
+
+    assert spectral_submesh is submesh  # one implementation, re-exported
+    F = np.array([[0, 1, 2], [2, 3, 4], [4, 5, 6]])
+    Fl, ids = submesh(F, np.array([False, True, True]))
+    assert ids.tolist() == [2, 3, 4, 5, 6]
+    assert np.array_equal(ids[Fl], F[1:])
+    Fl2, ids2 = submesh(F, np.array([2]))
+    assert np.array_equal(ids2[Fl2], F[[2]])

@@ -38,7 +38,7 @@ from scipy.sparse.linalg import eigsh
 
 from .errors import BolusError
 from .saliency import SaliencyResult, analyse, corner_angle_sums, flattenability, flattenability_value
-from .topology import MeshTopology
+from .topology import MeshTopology, submesh  # submesh: re-exported (it lived here)
 
 __all__ = [
     "HIGH_SALIENCY",
@@ -54,6 +54,7 @@ __all__ = [
     "connected_patches",
     "patch_stats",
     "segment",
+    "submesh",
 ]
 
 HIGH_SALIENCY = 0.25
@@ -255,16 +256,6 @@ class PatchStats:
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
-
-
-def submesh(F: np.ndarray, face_mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Faces selected by face_mask with compacted vertex indices.
-
-    Returns (F_local (k,3), vert_ids (j,)) with F_local indexing vert_ids.
-    """
-    Fs = F[face_mask]
-    vert_ids, inv = np.unique(Fs.ravel(), return_inverse=True)
-    return inv.reshape(-1, 3).astype(np.int64), vert_ids
 
 
 def patch_stats(V_analysis: np.ndarray, F: np.ndarray, labels: np.ndarray, V_true: np.ndarray | None = None) -> list[PatchStats]:

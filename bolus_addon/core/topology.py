@@ -22,6 +22,8 @@ from .errors import BolusError
 __all__ = [
     "MeshTopology",
     "as_mesh_arrays",
+    "check_mesh",
+    "submesh",
     "triangulate_polygons",
     "face_areas",
     "face_normals",
@@ -32,8 +34,9 @@ __all__ = [
 def as_mesh_arrays(V, F) -> tuple[np.ndarray, np.ndarray]:
     """Validate and convert ``V`` (n,3) and ``F`` (m,3) to float64 / int64 arrays.
 
-    Raises `BolusError` for wrong shapes, non-finite coordinates, out-of-range indices
-    or triangles that repeat a vertex.
+    Raises `BolusError` naming the first offender for wrong shapes, non-finite
+    coordinates (vertex index), out-of-range indices or triangles that repeat a vertex
+    (triangle index).  Zero-area triangles pass; `check_mesh` refuses them too.
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F)
@@ -44,13 +47,68 @@ def as_mesh_arrays(V, F) -> tuple[np.ndarray, np.ndarray]:
     if F.size and not np.issubdtype(F.dtype, np.integer):
         raise BolusError("triangle indices must be integers")
     F = F.astype(np.int64, copy=False)
-    if not np.all(np.isfinite(V)):
-        raise BolusError("the mesh has vertices with non-finite (NaN or infinite) coordinates")
-    if F.size and (F.min() < 0 or F.max() >= len(V)):
-        raise BolusError("a triangle refers to a vertex index outside the vertex array")
-    if F.size and np.any((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])):
-        raise BolusError("a triangle repeats one of its vertices (degenerate face)")
+    bad = np.nonzero(~np.isfinite(V).all(axis=1))[0]
+    if len(bad):
+        raise BolusError(f"the mesh has {len(bad)} vertex(es) with non-finite (NaN or infinite) coordinates, "
+                         f"e.g. vertex {int(bad[0])}")
+    if F.size:
+        out = np.nonzero(((F < 0) | (F >= len(V))).any(axis=1))[0]
+        if len(out):
+            raise BolusError(f"triangle {int(out[0])} refers to a vertex index outside the vertex array "
+                             f"({len(V)} vertices)")
+        rep = np.nonzero((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2]))[0]
+        if len(rep):
+            raise BolusError(f"{len(rep)} triangle(s) with a repeated vertex: triangle {int(rep[0])} repeats one of "
+                             "its vertices (degenerate face)")
     return V, F
+
+
+def check_mesh(V, F, what: str = "the mesh", *, nondegenerate: bool = True, manifold: bool = False,
+               min_faces: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """The core's one input check for a triangle mesh; returns ``(V, F)`` as float64 / int64.
+
+    Parameters
+    ----------
+    V : (n,3) array_like, F : (m,3) array_like of int
+    what : how the message names the mesh ("the patch", "part 2", ...)
+    nondegenerate : refuse zero-area triangles (coincident or collinear vertices), which
+        have no angles (eq. 4-1) and no spring rest shape (eq. 3-22)
+    manifold : refuse edges shared by more than two triangles
+    min_faces : refuse meshes with fewer triangles
+
+    Raises `BolusError` naming the problem and where (vertex / triangle / edge index);
+    see `as_mesh_arrays` for the array checks.  Needle triangles (tiny angles but a
+    positive area) pass: the cotangent weights and springs stay finite on them.
+    """
+    V, F = as_mesh_arrays(V, F)
+    if len(F) < min_faces:
+        raise BolusError(f"{what} has {len(F)} triangle(s); at least {min_faces} are needed")
+    if not (nondegenerate or manifold) or len(F) == 0:
+        return V, F
+    topo = MeshTopology(V, F)
+    if nondegenerate:
+        topo.require_nondegenerate(what)
+    if manifold:
+        bad = np.nonzero(topo.nonmanifold_edges)[0]
+        if len(bad):
+            i, j = (int(x) for x in topo.edges[bad[0]])
+            raise BolusError(f"{what} has {len(bad)} non-manifold edge(s) (shared by more than two triangles), "
+                             f"e.g. the edge between vertices {i} and {j}; Select > Select All by Trait > "
+                             "Non Manifold shows them")
+    return V, F
+
+
+def submesh(F, face_mask) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles selected by ``face_mask`` with compacted vertex indices.
+
+    Parameters: F (m,3) int; face_mask (m,) bool or an index array.
+    Returns ``(F_local (k,3) int64, vert_ids (j,) int64)``: ``F_local`` indexes
+    ``vert_ids``, the sorted original indices of the vertices used, so the sub-mesh is
+    ``(V[vert_ids], F_local)``.  This is the one implementation; callers never inline it.
+    """
+    Fs = np.asarray(F, dtype=np.int64)[face_mask]
+    vert_ids, inv = np.unique(Fs.ravel(), return_inverse=True)
+    return inv.reshape(-1, 3).astype(np.int64), vert_ids.astype(np.int64)
 
 
 def triangulate_polygons(corner_verts, face_sizes) -> tuple[np.ndarray, np.ndarray]:
