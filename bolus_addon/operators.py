@@ -133,7 +133,7 @@ class BolusOperator:
         size says the scene's units are wrong, for every operator that reads a region."""
         region = mesh_io.read_region(context)
         topo = MeshTopology(region.V, region.F)
-        return region, topo, region.warnings + check_topology(topo, allow_nonmanifold)
+        return region, topo, region.warnings + check_topology(topo, allow_nonmanifold, region.vert_ids)
 
     def _progress_start(self, context):
         self._wm = context.window_manager
@@ -175,26 +175,9 @@ def _quietly(fn, context) -> None:
         traceback.print_exc()
 
 
-def check_topology(topo: MeshTopology, allow_nonmanifold: bool) -> list[str]:
-    """Refuse degenerate faces (and non-manifold edges unless allowed); return warnings."""
-    warnings = []
-    bad = int(topo.degenerate_faces().sum())
-    if bad:
-        raise BolusError(
-            f"{bad} faces have zero area; remove them first (Mesh > Clean Up > Merge by Distance, "
-            "then Degenerate Dissolve)"
-        )
-    nm = int(topo.nonmanifold_edges.sum())
-    nmv = int((topo.vertex_fan_count > 1).sum())
-    if nm or nmv:
-        what = f"{nm} non-manifold edges" if nm else f"{nmv} non-manifold vertices"
-        if not allow_nonmanifold:
-            raise BolusError(
-                f"The region has {what}; a bolus must be a manifold surface "
-                "(find them with Select > Select All by Trait > Non Manifold)"
-            )
-        warnings.append(f"{what}: their vertices are treated like boundary vertices (flattenability 0)")
-    return warnings
+def check_topology(topo: MeshTopology, allow_nonmanifold: bool, vert_ids=None) -> list[str]:
+    """The core's surface check (`MeshTopology.surface_warnings`) on a region read from Blender."""
+    return topo.surface_warnings(allow_nonmanifold, "the region", vert_ids)
 
 
 def show_attribute_colors(context) -> None:

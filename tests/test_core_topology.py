@@ -164,3 +164,19 @@ def test_submesh_compacts_and_keeps_order():
     assert np.array_equal(ids[Fl], F[1:])
     Fl2, ids2 = submesh(F, np.array([2]))
     assert np.array_equal(ids2[Fl2], F[[2]])
+
+
+def test_surface_warnings_refuse_or_warn_with_user_indices():
+    V, F = _square()
+    V2 = np.vstack([V, [[0.5, 0.5, 1.0]]])
+    F2 = np.vstack([F, [[0, 2, 4]]])
+    topo = MeshTopology(V2, F2)
+    ids = np.array([10, 11, 12, 13, 14])
+    with pytest.raises(BolusError, match=r"The region has 1 non-manifold edges \(e.g. between vertices 10 and 12\)"):
+        topo.surface_warnings(False, "the region", ids)
+    (w,) = topo.surface_warnings(True, "the region", ids)
+    assert "treated like boundary" in w
+    assert MeshTopology(V, F).surface_warnings() == []
+    Vd = np.vstack([V, V[2]])
+    with pytest.raises(BolusError, match="on vertices 11, 12, 14"):
+        MeshTopology(Vd, np.vstack([F, [1, 2, 4]])).surface_warnings(True, "the region", ids)

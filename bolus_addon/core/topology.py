@@ -404,19 +404,48 @@ class MeshTopology:
     def mean_edge_length(self) -> float:
         return float(self.edge_lengths.mean()) if len(self.edges) else 0.0
 
-    def require_nondegenerate(self, what: str = "the mesh") -> None:
+    def require_nondegenerate(self, what: str = "the mesh", vert_ids=None) -> None:
         """Raise BolusError naming the first zero-area triangle (coincident or collinear
         vertices), the same test as `degenerate_faces`; such a triangle has no angles and
-        no shape, so angle sums (eq. 4-1) and springs (eq. 3-22) are undefined on it."""
+        no shape, so angle sums (eq. 4-1) and springs (eq. 3-22) are undefined on it.
+        vert_ids (n,) int, optional: the user's index of each vertex (the message names
+        those, e.g. Blender's vertex indices of a selected region)."""
         bad = np.nonzero(self.degenerate_faces())[0]
         if len(bad):
             f = int(bad[0])
-            i, j, k = (int(x) for x in self.F[f])
+            i, j, k = (int(x) for x in (self.F[f] if vert_ids is None else np.asarray(vert_ids)[self.F[f]]))
+            at = f"triangle {f} (vertices {i}, {j}, {k})" if vert_ids is None else f"the triangle on vertices {i}, {j}, {k}"
             raise BolusError(
-                f"{what} has {len(bad)} zero-area triangle(s), e.g. triangle {f} (vertices {i}, {j}, {k}): "
+                f"{what} has {len(bad)} zero-area triangle(s), e.g. {at}: "
                 "coincident or collinear vertices; merge them first (Mesh > Clean Up > Merge by Distance, "
                 "then Degenerate Dissolve)"
             )
+
+    def surface_warnings(self, allow_nonmanifold: bool = False, what: str = "the region", vert_ids=None) -> list[str]:
+        """Check a surface before analysis; return the warnings to show.
+
+        Zero-area triangles are refused (`require_nondegenerate`); non-manifold edges and
+        bow-tie vertices are refused unless ``allow_nonmanifold`` (saliency can treat their
+        vertices like boundary vertices, flattenability 0), then they give a warning.
+        vert_ids (n,) int, optional: the user's vertex indices, used in messages.
+        """
+        self.require_nondegenerate(what, vert_ids)
+        nm = int(self.nonmanifold_edges.sum())
+        nmv = int((self.vertex_fan_count > 1).sum())
+        if not (nm or nmv):
+            return []
+        ids = np.arange(self.n) if vert_ids is None else np.asarray(vert_ids)
+        if nm:
+            i, j = (int(x) for x in ids[self.edges[np.argmax(self.nonmanifold_edges)]])
+            where = f"{nm} non-manifold edges (e.g. between vertices {i} and {j})"
+        else:
+            where = f"{nmv} non-manifold vertices (e.g. vertex {int(ids[np.argmax(self.vertex_fan_count > 1)])})"
+        if not allow_nonmanifold:
+            raise BolusError(
+                f"{what[0].upper() + what[1:]} has {where}; a bolus must be a manifold surface "
+                "(find them with Select > Select All by Trait > Non Manifold)"
+            )
+        return [f"{where}: their vertices are treated like boundary vertices (flattenability 0)"]
 
     def degenerate_faces(self, rel_tol: float = 1e-10) -> np.ndarray:
         """(m,) bool: triangles whose area is below rel_tol * (median edge length)^2."""
