@@ -1251,7 +1251,8 @@ def curvature_sums(topo: MeshTopology) -> tuple[float, float]:
 
 
 def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: int | None = None,
-                 progress=None, start: str = "auto") -> Unfolding:
+                 progress=None, start: str = "auto", *, relax: bool = True, crossed_springs: bool = True,
+                 disturbing_springs: bool = True) -> Unfolding:
     """Unfold one patch (V (n,3) mm, F (m,3)) into the plane at true scale.
 
     A patch that is not a disk is first cut to one (`cutting.cut_to_disk`).
@@ -1266,6 +1267,16 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     start: "auto" (= "conformal") starts from `conformal_unfolding`, "greedy" from the
     coordinate transformation of 4.5.1 (`initial_unfolding`; if that folds over, the
     conformal map is used and a warning says so).
+
+    Stage switches (for the ablation of bench/unfold_bench.py; defaults = the full method):
+    relax=False: no spring relaxation and no length refinement (``refine_rounds`` is
+    ignored): the start as it is (for "greedy" with its own relaxation of the part
+    unfolded so far, 4.5.3), mirrored to counter-clockwise; only if it has flipped
+    triangles or outline crossings does the overlap correction (4.5.3) run on it, as in the
+    full pipeline (flip rounds, local then whole-patch outline correction, `_untangle`);
+    a flip-free start without crossings comes back unchanged.  crossed_springs=False /
+    disturbing_springs=False: the model is built without the crossed springs (3.5) / the
+    disturbing contour springs (eq. 4-25) (`build_springs`), in every stage.
 
     Speed (issue 9; the stages of the seed are kept, their budgets are ours):
     - the conformal start is one sparse solve; 4.5.1 reaches the same minimum where it
@@ -1310,7 +1321,8 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     deficit, excess = curvature_sums(topo0)
     cut = cut_to_disk(V, F)
     topo = MeshTopology(cut.V, cut.F)
-    springs = build_springs(topo)
+    springs = build_springs(topo, contour_window=CONTOUR_WINDOW if disturbing_springs else 0,
+                            crossed=crossed_springs)
     warnings: list[str] = []
     if start == "auto":
         start = "conformal"
@@ -1343,7 +1355,10 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         el_seen.append(el)
         return bool(far)
 
-    if method == "lbfgs":
+    it = 0
+    if not relax:
+        refine_rounds = 0
+    elif method == "lbfgs":
         # from a flip-free start the flip penalty (4.5.3) is on from the first step, so the
         # relaxation does not fold the pattern (a nostril pocket folds flat otherwise, and
         # unfolding the fold afterwards took minutes of penalty rounds)
