@@ -1,0 +1,146 @@
+"""Analysis operators: `bolus.saliency_preview` (eqs. 4-1..4-4) and `bolus.segment`
+(eqs. 3-3..3-8, 4-5); contract in ../shared/SPEC.md."""
+from __future__ import annotations
+
+import json
+
+import bpy
+import numpy as np
+
+from . import mesh_io
+from .core.colormap import categorical_linear_rgba, outside_linear_rgba, scalar_to_linear_rgba
+from .core.saliency import analyse
+from .core.spectral import segment
+from .operators import (
+    ATTR_FLATTENABILITY,
+    ATTR_PATCH,
+    ATTR_PATCH_COLOR,
+    ATTR_SALIENCY,
+    ATTR_SALIENCY_COLOR,
+    PROP_FLV,
+    PROP_PATCH_TABLE,
+    PROP_SUM_VARPI,
+    BolusOperator,
+)
+from .properties import (
+    color_by_property,
+    eta_property,
+    method_property,
+    patches_property,
+    seed_property,
+    smoothing_property,
+)
+
+
+def show_attribute_colors(context) -> None:
+    """Switch visible 3D views in Solid mode to attribute colours (no-op headless)."""
+    screen = getattr(context, "screen", None)
+    if screen is None:
+        return
+    for area in screen.areas:
+        if area.type == "VIEW_3D":
+            for space in area.spaces:
+                if space.type == "VIEW_3D" and space.shading.type == "SOLID":
+                    space.shading.color_type = "VERTEX"
+
+
+class BOLUS_OT_saliency_preview(BolusOperator, bpy.types.Operator):
+    """Colour the surface by where it cannot lie flat (flattenability and saliency, eqs. 4-1..4-4)"""
+
+    bl_idname = "bolus.saliency_preview"
+    bl_label = "Flattenability Preview"
+
+    smoothing_mm: smoothing_property()
+    color_by: color_by_property()
+
+    def run(self, context):
+        region, topo, warnings = self.read_region(context, allow_nonmanifold=True)
+        self.progress(0.2, "angle sums and saliency")
+        res = analyse(region.V, region.F, self.smoothing_mm, topo=topo)
+        self.progress(0.8, "writing attributes")
+        obj, me = region.obj, region.mesh
+        nv = len(me.vertices)
+        varpi = np.zeros(nv)
+        sal = np.zeros(nv)
+        varpi[region.vert_ids] = res.varpi
+        sal[region.vert_ids] = res.saliency
+        shown = sal if self.color_by == "SALIENCY" else varpi
+        colors = np.tile(outside_linear_rgba(), (nv, 1))
+        colors[region.vert_ids] = scalar_to_linear_rgba(shown[region.vert_ids])
+        with mesh_io.object_mode(obj):
+            mesh_io.write_attribute(me, ATTR_FLATTENABILITY, "FLOAT", "POINT", varpi)
+            mesh_io.write_attribute(me, ATTR_SALIENCY, "FLOAT", "POINT", sal)
+            mesh_io.write_point_colors(me, ATTR_SALIENCY_COLOR, colors)
+            me.update()
+        obj[PROP_SUM_VARPI] = res.sum_varpi
+        obj[PROP_FLV] = res.flv
+        show_attribute_colors(context)
+        self.warn_all(warnings)
+        where = "selected faces" if region.selection_only else "whole mesh"
+        self.report(
+            {"INFO"},
+            f"Flattenability of the {where} ({len(region.V)} vertices, smoothing {self.smoothing_mm:g} mm): "
+            f"sum varpi = {res.sum_varpi:.4f} rad, FLV = {res.flv:.4g}",
+        )
+        return {"FINISHED"}
+
+
+def format_patch_row(row: dict) -> str:
+    return (
+        f"Patch {row['patch']}: {row['vertices']} vertices, {row['edges']} edges, {row['faces']} triangles, "
+        f"{row['area_mm2'] / 100.0:.1f} cm², sum varpi {row['sum_varpi']:.4f}, FLV {row['flv']:.4g}"
+    )
+
+
+class BOLUS_OT_segment(BolusOperator, bpy.types.Operator):
+    """Split the surface into patches that flatten well (saliency-aware spectral clustering, eqs. 3-3..3-8, 4-5)"""
+
+    bl_idname = "bolus.segment"
+    bl_label = "Segment into Patches"
+
+    patches: patches_property()
+    eta: eta_property()
+    seed: seed_property()
+    smoothing_mm: smoothing_property()
+    method: method_property()
+
+    def run(self, context):
+        region, topo, warnings = self.read_region(context, allow_nonmanifold=False)
+        seg = segment(
+            region.V,
+            region.F,
+            patches=self.patches,
+            eta=self.eta,
+            smoothing_mm=self.smoothing_mm,
+            rng=self.seed,
+            method=self.method.lower(),
+            face_groups=region.tri_poly,
+            progress=lambda f, t: self.progress(0.9 * f, t),
+            topo=topo,
+        )
+        obj, me = region.obj, region.mesh
+        npoly = len(me.polygons)
+        poly_labels = np.full(npoly, -1, dtype=np.int64)
+        poly_labels[region.tri_poly] = seg.face_labels
+        seams = mesh_io.polygon_edge_labels(me, poly_labels)
+        touched = mesh_io.edges_of_polygons(me, region.poly_ids)
+        table = [p.as_dict() for p in seg.patches]
+        with mesh_io.object_mode(obj):
+            mesh_io.write_attribute(me, ATTR_PATCH, "INT", "FACE", poly_labels)
+            mesh_io.set_seams(me, seams, touched)
+            mesh_io.write_face_colors(me, ATTR_PATCH_COLOR, categorical_linear_rgba(poly_labels))
+            me.update()
+        obj[PROP_PATCH_TABLE] = json.dumps({"requested": self.patches, "eta": self.eta, "seed": self.seed, "smoothing_mm": self.smoothing_mm, "patches": table})
+        if seg.patch_count != self.patches:
+            warnings.append(
+                f"{seg.patch_count} patches instead of the {self.patches} asked: clusters that fell apart "
+                "became separate patches, crumbs were merged into a neighbour"
+            )
+        self.warn_all(warnings)
+        self.report({"INFO"}, f"Segmented '{obj.name}' into {seg.patch_count} patches (attribute '{ATTR_PATCH}', seams on the borders)")
+        for row in table:
+            self.report({"INFO"}, format_patch_row(row))
+        return {"FINISHED"}
+
+
+classes = (BOLUS_OT_saliency_preview, BOLUS_OT_segment)
