@@ -51,7 +51,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import BolusError
-from .print_orientation import normal_curvature
+from .curvature import normal_curvature
 from .spectral import as_rng, cluster_rows, connected_patches, graph_laplacian, smallest_eigenvectors
 from .topology import MeshTopology
 
