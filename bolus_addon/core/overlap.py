@@ -23,8 +23,10 @@ import numpy as np
 
 from .errors import BolusError
 from .geometry2d import cross2d
+from .topology import as_mesh_arrays
 
 __all__ = [
+    "as_pattern_arrays",
     "signed_areas",
     "flipped_faces",
     "boundary_edge_array",
@@ -37,23 +39,29 @@ __all__ = [
     "overlap_summary",
 ]
 
+#: touching is not overlapping: contacts closer than REL_TOL x the mean edge length are ignored
 REL_TOL = 1e-9
+#: candidate pairs tested per block (bounds the temporary (pairs x 3 x 3) arrays to ~15 MB)
 _CHUNK = 200_000
+#: more candidate pairs than this means triangles piled up (a collapsed pattern): refuse, ~2 GB of pairs
 MAX_PAIRS = 50_000_000
+#: the grid cell grows until the boxes cover at most this many cells each on average
+CELLS_PER_BOX = 16
+#: at most this many cells along an axis, so cell ids (x * ny + y) stay far inside int64
+MAX_CELLS_PER_AXIS = 65536.0
 
 
-def _as_uv(UV, F) -> tuple[np.ndarray, np.ndarray]:
+def as_pattern_arrays(UV, F) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a flat mesh: UV (n,2) float64, F (m,3) int64 (m may be 0).
+
+    The checks are `topology.as_mesh_arrays`' (integer indices in range, no triangle
+    repeating a vertex, finite coordinates, naming the first offender) on UV lifted to
+    z = 0.  Zero-area and flipped triangles pass: finding them is this module's job.
+    """
     UV = np.asarray(UV, dtype=np.float64)
-    F = np.asarray(F)
     if UV.ndim != 2 or UV.shape[1] != 2:
         raise BolusError(f"pattern coordinates must be an (n, 2) array, got shape {UV.shape}")
-    if F.ndim != 2 or F.shape[1] != 3:
-        raise BolusError(f"triangles must be an (m, 3) array, got shape {F.shape}")
-    F = F.astype(np.int64, copy=False)
-    if F.size and (F.min() < 0 or F.max() >= len(UV)):
-        raise BolusError("a triangle refers to a vertex index outside the pattern")
-    if not np.all(np.isfinite(UV)):
-        raise BolusError("the pattern has non-finite (NaN or infinite) coordinates")
+    _, F = as_mesh_arrays(np.c_[UV, np.zeros(len(UV))], F)
     return UV, F
 
 
@@ -67,7 +75,7 @@ def _mean_edge_length(UV, F) -> float:
 
 def signed_areas(UV, F) -> np.ndarray:
     """Signed areas (m,) of the triangles F (m,3) in UV (n,2); positive = counter-clockwise."""
-    UV, F = _as_uv(UV, F)
+    UV, F = as_pattern_arrays(UV, F)
     P = UV[F]
     return 0.5 * cross2d(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
 
@@ -79,54 +87,61 @@ def flipped_faces(UV, F, rel_tol: float = 1e-12) -> np.ndarray:
     so a collapsed (zero-area) triangle is reported too.  A pattern that came out mirrored
     as a whole has every triangle flipped: mirror it (UV[:, 0] *= -1) before judging.
     """
-    UV, F = _as_uv(UV, F)
+    UV, F = as_pattern_arrays(UV, F)
     L = _mean_edge_length(UV, F)
     return signed_areas(UV, F) <= rel_tol * L * L
 
 
 # ---------------------------------------------------------------- broad phase
-def candidate_pairs(lo, hi, tol: float = 0.0) -> np.ndarray:
-    """Pairs (k,2), i < j, of boxes lo/hi (b,2) whose closed boxes overlap (within tol).
+def _grid_cells(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Grid cell ranges of boxes lo/hi (b,2): first and last cell (b,2) int64 of each box.
 
-    Uniform grid broad phase: the cell is the median box size (doubled while boxes
-    would fill more than ~16 cells each on average); every box is entered in the cells
-    it covers and a pair is reported only in the first cell both cover, so no pair
-    repeats.  Vectorised: memory and time ~ (boxes + candidate pairs).
+    The cell is the median box size, doubled while boxes would cover more than
+    `CELLS_PER_BOX` cells each on average (a few huge boxes must not flood the grid).
     """
-    lo = np.asarray(lo, dtype=np.float64)
-    hi = np.asarray(hi, dtype=np.float64)
     k = len(lo)
-    if k < 2:
-        return np.zeros((0, 2), dtype=np.int64)
-    lo = lo - tol
-    hi = hi + tol
     origin = lo.min(axis=0)
     span = float((hi.max(axis=0) - origin).max())
     cell = float(np.median((hi - lo).max(axis=1)))
     if not cell > 0:
         cell = span / np.sqrt(k) if span > 0 else 1.0
-    cell = max(cell, span / 65536.0, 1e-300)  # keep cell ids well inside int64
+    cell = max(cell, span / MAX_CELLS_PER_AXIS, 1e-300)  # keep cell ids well inside int64
     while True:
         i0 = np.floor((lo - origin) / cell).astype(np.int64)
         i1 = np.floor((hi - origin) / cell).astype(np.int64)
         ext = i1 - i0 + 1
-        cnt = ext[:, 0] * ext[:, 1]
-        if cnt.sum() <= 16 * k + 1024:
-            break
+        if (ext[:, 0] * ext[:, 1]).sum() <= CELLS_PER_BOX * k + 1024:
+            return i0, i1
         cell *= 2.0
+
+
+def candidate_pairs(lo, hi, tol: float = 0.0) -> np.ndarray:
+    """Pairs (k,2), i < j, of boxes lo/hi (b,2) whose closed boxes overlap (within tol).
+
+    Uniform grid broad phase (`_grid_cells`): every box is entered in the cells it
+    covers and a pair is reported only in the first cell both cover, so no pair
+    repeats.  Vectorised: memory and time ~ (boxes + candidate pairs); more than
+    `MAX_PAIRS` candidates raise `BolusError` (triangles piled on top of each other).
+    """
+    lo = np.asarray(lo, dtype=np.float64) - tol
+    hi = np.asarray(hi, dtype=np.float64) + tol
+    k = len(lo)
+    if k < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    i0, i1 = _grid_cells(lo, hi)
+    ext = i1 - i0 + 1
+    cnt = ext[:, 0] * ext[:, 1]
     total = int(cnt.sum())
     item = np.repeat(np.arange(k), cnt)
     local = np.arange(total) - np.repeat(np.cumsum(cnt) - cnt, cnt)
     cx = i0[item, 0] + local % ext[item, 0]
     cy = i0[item, 1] + local // ext[item, 0]
-    ny = int(i1[:, 1].max()) + 1
-    cid = cx * ny + cy
+    cid = cx * (int(i1[:, 1].max()) + 1) + cy
     order = np.lexsort((item, cid))
     cid_s, it_s, cx_s, cy_s = cid[order], item[order], cx[order], cy[order]
     starts = np.r_[0, np.nonzero(np.diff(cid_s))[0] + 1]
     sizes = np.diff(np.r_[starts, total])
-    grp_end = np.repeat(starts + sizes, sizes)
-    c2 = grp_end - np.arange(total) - 1  # partners after each entry in its cell
+    c2 = np.repeat(starts + sizes, sizes) - np.arange(total) - 1  # partners after each entry in its cell
     if c2.sum() > MAX_PAIRS:
         raise BolusError(
             f"the pattern is too tangled to check for overlaps ({int(c2.sum())} candidate pairs): "
@@ -136,9 +151,7 @@ def candidate_pairs(lo, hi, tol: float = 0.0) -> np.ndarray:
     b = a + 1 + (np.arange(len(a)) - np.repeat(np.cumsum(c2) - c2, c2))
     I, J = it_s[a], it_s[b]  # I < J: sorted by item inside a cell
     # report a pair only in the lowest cell both boxes cover
-    first_x = np.maximum(i0[I, 0], i0[J, 0])
-    first_y = np.maximum(i0[I, 1], i0[J, 1])
-    keep = (cx_s[a] == first_x) & (cy_s[a] == first_y)
+    keep = (cx_s[a] == np.maximum(i0[I, 0], i0[J, 0])) & (cy_s[a] == np.maximum(i0[I, 1], i0[J, 1]))
     I, J = I[keep], J[keep]
     keep = np.all((lo[I] <= hi[J]) & (lo[J] <= hi[I]), axis=1)
     return np.stack([I[keep], J[keep]], axis=1)
@@ -150,7 +163,10 @@ def boundary_edge_array(F, loops=None) -> np.ndarray:
 
     With ``loops`` (list of vertex loops, e.g. `cutting.boundary_loops`) the edges are
     (loop[i], loop[i+1]) loop after loop, closing edges included; without, the
-    half-edges of F that no other triangle shares, in face order.
+    half-edges of F that no other triangle shares, in face order.  That is a set of
+    edges, not a walk: the crossing test needs no order, so the loop walker
+    (`cutting.boundary_loops`, which costs a wedge analysis) is only used when the
+    caller already has its loops.
     """
     if loops is not None:
         parts = [np.stack([np.asarray(lp), np.roll(np.asarray(lp), -1)], axis=1) for lp in loops if len(lp) >= 2]
@@ -200,7 +216,7 @@ def boundary_self_intersections(UV, F, loops=None, rel_tol: float = REL_TOL) -> 
     i < j of row indices into ``boundary_edge_array(F, loops)`` whose edges properly
     cross; edges sharing a vertex are never paired.  Empty for a simple outline.
     """
-    UV, F = _as_uv(UV, F)
+    UV, F = as_pattern_arrays(UV, F)
     E = boundary_edge_array(F, loops)
     return segment_intersections(UV, E, rel_tol, _mean_edge_length(UV, F))
 
@@ -237,7 +253,7 @@ def overlapping_face_pairs(UV, F, rel_tol: float = REL_TOL) -> np.ndarray:
     a shared edge: the two opposite corners on the same side of it (a fold-over);
     the same three vertices: overlap unless collapsed.
     """
-    UV, F = _as_uv(UV, F)
+    UV, F = as_pattern_arrays(UV, F)
     m = len(F)
     if m < 2:
         return np.zeros((0, 2), dtype=np.int64)
@@ -278,7 +294,7 @@ def overlapping_face_pairs(UV, F, rel_tol: float = REL_TOL) -> np.ndarray:
 
 def overlapping_faces(UV, F, rel_tol: float = REL_TOL) -> np.ndarray:
     """(m,) bool: triangles that overlap another triangle of the same pattern (seed 4.5.3)."""
-    UV, F = _as_uv(UV, F)
+    UV, F = as_pattern_arrays(UV, F)
     hit = np.zeros(len(F), dtype=bool)
     pairs = overlapping_face_pairs(UV, F, rel_tol)
     hit[pairs.ravel()] = True
