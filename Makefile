@@ -2,6 +2,7 @@
 # make test  - the whole test suite on Blender 5.0.1 and 5.2.3, the smoke subset on 4.5 LTS and 4.2 LTS
 # make test-core - the bpy-free tests only (Blender 5.0.1's venv)
 # make bench - benchmarks (printed, not asserted)
+# make pictures - the README's step-by-step pictures in docs/img/ (scripts/readme_pictures.py)
 # make extension - the installable extension zip in dist/ (Blender's own builder, from bpy)
 # make extension-wheels - one zip per platform in dist/, with scipy and scikit-learn (cp311 and cp313) inside
 #
@@ -37,7 +38,7 @@ PIP_INSTALL := -m pip install --quiet --disable-pip-version-check
 NO_PY313 := SKIPPED: the Blender 5.2.3 run (.venv52) -- no working Python 3.13 found (python3.13 on PATH, \
 pyenv's versions/3.13.*, /usr/local/bin, /usr/bin); install one or pass PYTHON313=/path/to/python3.13
 
-.PHONY: demo test test-core bench extension extension-wheels clean
+.PHONY: demo pictures test test-core bench extension extension-wheels clean
 
 $(VENV)/.installed: requirements.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -62,6 +63,9 @@ $(VENV42)/.installed: requirements-bpy42.txt
 
 demo: $(VENV)/.installed
 	$(PY) scripts/demo.py --out out
+
+pictures: $(VENV)/.installed
+	$(PY) scripts/readme_pictures.py --out docs/img
 
 # Every run goes ahead even when an earlier one failed; the target fails if any did.
 test: $(VENV)/.installed $(VENV45)/.installed $(VENV42)/.installed $(if $(PYTHON313),$(VENV52)/.installed)
