@@ -16,13 +16,24 @@ import bpy
 import numpy as np
 
 from .core.errors import BolusError
+from .core.topology import submesh
 
-__all__ = ["Region", "mm_per_unit", "read_region", "size_warning", "check_finite", "read_face_labels", "apply_cuts", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "polygons_next_to", "set_seams", "show_colors"]
+__all__ = ["Region", "mm_per_unit", "world_mm", "read_region", "size_warning", "check_finite", "read_face_labels", "apply_cuts", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "polygons_next_to", "set_seams", "show_colors"]
 
 
 def mm_per_unit(scene: bpy.types.Scene) -> float:
     """Millimetres in one Blender unit (SPEC: one unit = scale_length metres)."""
     return float(scene.unit_settings.scale_length) * 1000.0
+
+
+def world_mm(co: np.ndarray, obj: bpy.types.Object, mm: float) -> np.ndarray:
+    """Local coordinates co (n,3) of obj -> world coordinates in millimetres (n,3).
+
+    The one world->mm conversion of the add-on; mm is `mm_per_unit(scene)`.  Non-finite
+    input stays non-finite (`check_finite` names it)."""
+    M = np.array(obj.matrix_world, dtype=np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        return (np.asarray(co, dtype=np.float64) @ M[:3, :3].T + M[:3, 3]) * mm
 
 
 @dataclass
@@ -103,12 +114,9 @@ def read_region(context, obj: bpy.types.Object | None = None, polys: np.ndarray 
     keep = region_poly[tri_p]
     tri_v, tri_p = tri_v[keep], tri_p[keep]
     co = _get(me.vertices, "co", nv, np.float64, 3)
-    M = np.array(obj.matrix_world, dtype=np.float64)
     scale = mm_per_unit(context.scene)
-    vert_ids, inv = np.unique(tri_v.ravel(), return_inverse=True)
-    F = inv.reshape(-1, 3).astype(np.int64)
-    with np.errstate(invalid="ignore", over="ignore"):
-        V = (co[vert_ids] @ M[:3, :3].T + M[:3, 3]) * scale
+    F, vert_ids = submesh(tri_v, slice(None))
+    V = world_mm(co[vert_ids], obj, scale)
     check_finite(obj, vert_ids, co[vert_ids], V)
     units = size_warning(V, scale)
     if units:

@@ -5,6 +5,7 @@ import json
 
 import bpy
 
+from . import mesh_io
 from .cut_ops import PROP_CUT_TABLE
 from .operators import PROP_FLV, PROP_PATCH_TABLE, PROP_SUM_VARPI
 from .pattern_ops import PATTERN_SUFFIX, PROP_PATTERN_TABLE
@@ -58,8 +59,7 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
         layout = self.layout
         s = context.scene.bolus
         obj = context.active_object
-        unit = context.scene.unit_settings.scale_length
-        layout.label(text=f"1 unit = {unit * 1000:g} mm", icon="DRIVER_DISTANCE")
+        layout.label(text=f"1 unit = {mesh_io.mm_per_unit(context.scene):g} mm", icon="DRIVER_DISTANCE")
 
         box = layout.box()
         box.label(text="1. Where it cannot lie flat", icon="SHADING_SOLID")
