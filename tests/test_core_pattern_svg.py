@@ -174,7 +174,7 @@ def ragged_outlines():
 @pytest.mark.parametrize("shape", ["star", "patch"])
 @pytest.mark.parametrize("d", [0.3, 3.0, 10.0, -0.5, -3.0])
 def test_offset_of_ragged_outlines_is_simple_and_at_the_right_distance(shape, d):
-    from bolus_addon.core.pattern_svg import _winding
+    from bolus_addon.core.polygon_offset import winding_numbers as _winding
 
     P = ragged_outlines()[shape]
     out = offset_polygon(P, d)
