@@ -1,7 +1,7 @@
 # make demo  - run the main job on the built-in example and write out/
 # make test  - the whole test suite on Blender 5.0.1 and 5.2.3, the smoke subset on 4.5 LTS and 4.2 LTS
 # make test-core - the bpy-free tests only (Blender 5.0.1's venv)
-# make bench - benchmarks (printed, not asserted)
+# make bench - benchmarks (printed, not asserted), their tables written to docs/benchmarks.md
 # make pictures - the README's step-by-step pictures in docs/img/ (scripts/readme_pictures.py)
 # make extension - the installable extension zip in dist/ (Blender's own builder, from bpy)
 # make extension-wheels - one zip per platform in dist/, with scipy and scikit-learn (cp311 and cp313) inside
@@ -81,11 +81,16 @@ test: $(VENV)/.installed $(VENV45)/.installed $(VENV42)/.installed $(if $(PYTHON
 test-core: $(VENV)/.installed
 	$(PY) -m pytest tests -m "not blender"
 
+# docs/benchmarks.md is written fresh (a header with the date, machine and versions), then every
+# script appends its tables; each runs even when an earlier one failed, the target fails if any did.
+# `make bench BENCH_ARGS=--quick` passes options to all four (unfold_bench.py also takes --only NAME).
+BENCH_MD ?= docs/benchmarks.md
+BENCH_ARGS ?=
 bench: $(VENV)/.installed
-	$(PY) bench/segment_bench.py
-	$(PY) bench/unfold_bench.py
-	$(PY) bench/cuts_bench.py
-	$(PY) bench/print_bench.py
+	$(PY) bench/benchutil.py --header $(BENCH_MD)
+	@rc=0; for b in segment_bench unfold_bench cuts_bench print_bench; do \
+	  echo "== bench/$$b.py"; $(PY) bench/$$b.py --markdown $(BENCH_MD) $(BENCH_ARGS) || rc=1; \
+	done; exit $$rc
 
 extension: $(VENV)/.installed
 	mkdir -p dist

@@ -156,6 +156,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="only the two small face meshes")
     ap.add_argument("--no-unfold", action="store_true", help="skip the EL/EA comparison")
     ap.add_argument("--json", help="write the figures to this file")
+    ap.add_argument("--markdown", metavar="FILE", help="append the table as markdown to FILE (make bench)")
     ap.add_argument("--verbose", action="store_true", help="show the operators' reports")
     args = ap.parse_args(argv)
 
@@ -187,7 +188,37 @@ def main(argv=None) -> int:
           f"{sum(not r['second_run_identical'] for r in rows)} of {len(rows)} meshes changed")
     if args.json:
         write_json(args.json, {"rows": rows, "target_drop": TARGET})
+    if args.markdown:
+        markdown_section(args.markdown, rows, argv)
     return 0
+
+
+def markdown_section(path, rows: list[dict], argv) -> None:
+    """Append this run's table to `path` (benchutil's markdown; make bench: docs/benchmarks.md)."""
+    from benchutil import Table, append_markdown, pct, run_line
+
+    t = Table([("mesh", "<"), ("faces", ">"), ("patches", ">"), ("smooth_cuts s", ">"), ("new vertices", ">"),
+               ("second run: new vertices", ">"), ("weighted turning drop", ">"),
+               (f"borders >= {TARGET:.0%} lower", ">"),
+               ("EL % jagged → smooth", ">"), ("EA % jagged → smooth", ">")])
+    for r in rows:
+        bs = r["borders"]
+        tb = sum(b["turning_before"] * b["length_before_mm"] for b in bs)
+        ta = sum(b["turning_after"] * b["length_after_mm"] for b in bs)
+        met = sum(1 for b in bs if b["turning_before"] > 0 and b["turning_after"] <= (1 - TARGET) * b["turning_before"])
+        j, s = r.get("unfold_jagged"), r.get("unfold_smooth")
+        el = f"{pct(j['EL'])} → {pct(s['EL'])}" if j and s else "n/a"
+        ea = f"{pct(j['EA'])} → {pct(s['EA'])}" if j and s else "n/a"
+        t.add(Path(r["mesh"]).stem, f"{r['faces']:,}", r["patches"], f"{r['smooth_cuts_s']:.2f}", r["new_vertices"],
+              f"{r['second_run_new_vertices']}" + ("" if r["second_run_identical"] else " (mesh changed)"),
+              f"{(1 - ta / tb):.0%}" if tb > 0 else "n/a", f"{met} of {len(bs)}", el, ea)
+    append_markdown(path, "\n".join([
+        "## Smooth cut lines (`bench/cuts_bench.py`)", "", run_line("cuts_bench.py", argv), "",
+        f"Each mesh segmented (`bolus.segment`, eta={ETA:g}, seed={SEED}) and copied: the jagged copy as segment "
+        "left it (the peer), the other after `bolus.smooth_cuts()`; both unfolded (`bolus.unfold`) in the same run. "
+        "Turning = mean absolute geodesic turning angle per mm of a border, weighted by border length over the "
+        f"mesh; a border counts when it turns at least {TARGET:.0%} less. Second run = smooth_cuts again on its "
+        "own result (0 new vertices: idempotent). EL / EA in % of the whole pattern (SPEC).", "", t.markdown()]))
 
 
 if __name__ == "__main__":

@@ -5,6 +5,7 @@ Run from the repository root:
     .venv/bin/python bench/segment_bench.py            # all four meshes
     .venv/bin/python bench/segment_bench.py --quick    # only the two face meshes
     .venv/bin/python bench/segment_bench.py --json out/segment_bench.json
+    .venv/bin/python bench/segment_bench.py --markdown docs/benchmarks.md   # append the table (make bench)
 
 For every mesh, in the same process and on the same object:
 
@@ -26,7 +27,6 @@ see its README for sources, licences and units.
 """
 from __future__ import annotations
 
-import argparse
 import gc
 import json
 import os
@@ -36,11 +36,9 @@ import time
 import tracemalloc
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
-SHARED_MESHES = Path(os.environ.get("BOLUS_SHARED_MESHES", ROOT.parent / "shared" / "meshes"))
+import benchutil
+from benchutil import SHARED_MESHES, Table, captured_output, clean_scene, current_rss_kb, import_mesh, maxrss_kb, \
+    reset_peak_rss
 
 PATCHES = 4
 ETA = 5.0
@@ -61,11 +59,6 @@ MB = 1024.0 * 1024.0
 
 
 # ----------------------------------------------------------------------------- helpers
-
-
-from benchutil import captured_output, clean_scene, current_rss_kb, import_mesh, maxrss_kb, reset_peak_rss, write_json  # noqa: E402
-
-
 
 
 def run_segment(bpy, ob, eta: float, verbose: bool) -> dict:
@@ -266,40 +259,45 @@ def bench_mesh(bpy, fname: str, scale_length: float, note: str, repeat: int, ver
     return row
 
 
-def print_table(rows: list[dict], repeat: int) -> None:
-    head = (
-        f"{'mesh':<22} {'triangles':>9} {'segment s':>10} {'smart_proj s':>12} {'ratio':>7} "
-        f"{'tracemalloc MB':>14} {'RSS delta MB':>12} {'max Σϖ eta=0':>13} {'max Σϖ eta=5':>13} {'patches':>9}"
-    )
-    print()
-    print(
-        f"Summary (best of {repeat} wall-clock runs; segment: patches={PATCHES}, eta={ETA:g}, seed={SEED}, "
-        f"default smoothing; ratio = segment / smart_project, target <= {TARGET_RATIO:g}x;"
-    )
-    print(" tracemalloc = peak of Python/numpy allocations during one segment call;")
-    print(" RSS delta = process peak RSS during that call minus RSS before it;")
-    print(" max Σϖ = largest per-patch sum varpi in rad from bolus_patch_table; patches = count for eta=0/eta=5)")
-    print(head)
-    print("-" * len(head))
+def summary_table(rows: list[dict]) -> Table:
+    t = Table([("mesh", "<"), ("triangles", ">"), ("segment s", ">"), ("smart_project s", ">"), ("ratio", ">"),
+               ("tracemalloc MB", ">"), ("RSS delta MB", ">"), ("max Σϖ η=0", ">"), ("max Σϖ η=5", ">"),
+               ("patches η=0/5", ">")])
     for r in rows:
         if "error" in r:
-            print(f"{r['mesh']:<22} {'':>9} ERROR: {r['error']}")
+            t.add_error(r["mesh"], r["error"])
             continue
-        print(
-            f"{r['mesh']:<22} {r['triangles']:>9d} {r['segment_s']:>10.3f} {r['smart_project_s']:>12.3f} "
-            f"{r['ratio']:>6.1f}x {r['tracemalloc_peak_mb']:>14.1f} {r['rss_delta_mb']:>12.1f} "
-            f"{r['eta0']['max_sum_varpi']:>13.2f} {r['eta5']['max_sum_varpi']:>13.2f} "
-            f"{str(r['eta0']['patches']) + '/' + str(r['eta5']['patches']):>9}"
-        )
+        t.add(r["mesh"], f"{r['triangles']:,}", f"{r['segment_s']:.3f}", f"{r['smart_project_s']:.3f}",
+              f"{r['ratio']:.1f}×", f"{r['tracemalloc_peak_mb']:.1f}", f"{r['rss_delta_mb']:.1f}",
+              f"{r['eta0']['max_sum_varpi']:.2f}", f"{r['eta5']['max_sum_varpi']:.2f}",
+              f"{r['eta0']['patches']}/{r['eta5']['patches']}")
+    return t
+
+
+def legend(repeat: int) -> str:
+    return (f"Best of {repeat} wall-clock runs; segment: patches={PATCHES}, eta={ETA:g}, seed={SEED}, default "
+            f"smoothing; ratio = segment / smart_project (target <= {TARGET_RATIO:g}×); tracemalloc = peak of "
+            "Python/numpy allocations during one segment call; RSS delta = process peak RSS during that call minus "
+            "RSS before it; max Σϖ = largest per-patch sum of the angle deficit ϖ in rad (bolus_patch_table), "
+            "plain spectral clustering (η = 0) against the saliency-aware one (η = 5); patches = count for each")
+
+
+def markdown(rows: list[dict], repeat: int, argv) -> str:
+    met = [r for r in rows if "ratio" in r and r["ratio"] <= TARGET_RATIO]
+    judged = [r for r in rows if "ratio" in r]
+    out = ["## Segmentation (`bench/segment_bench.py`)", "",
+           benchutil.run_line("segment_bench.py", argv), "",
+           f"`bpy.ops.bolus.segment(patches={PATCHES}, eta={ETA:g}, seed={SEED})` beside `bpy.ops.uv.smart_project()` "
+           "(defaults, Edit Mode, all faces) on the same object in the same run. " + legend(repeat) + ".", "",
+           summary_table(rows).markdown(), "",
+           f"segment <= {TARGET_RATIO:g}× smart_project on {len(met)} of {len(judged)} meshes."]
     if any(r["mesh"] == "demosthenes" for r in rows):
-        print("demosthenes is in normalised units; it is taken as 1 unit = 100 mm (scale_length 0.1).")
+        out += ["", "demosthenes is in normalised units; it is taken as 1 unit = 100 mm (scale_length 0.1)."]
+    return "\n".join(out)
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--quick", action="store_true", help="only the two face meshes")
-    ap.add_argument("--json", metavar="PATH", help="also write the figures as JSON to PATH")
-    ap.add_argument("--repeat", type=int, default=3, help="timed runs per operator, the best is kept (default 3)")
+    ap = benchutil.parser(__doc__, "only the two face meshes")
     ap.add_argument("--verbose", action="store_true", help="show the operators' own reports")
     args = ap.parse_args(argv)
     repeat = max(1, args.repeat)
@@ -333,26 +331,25 @@ def main(argv=None) -> int:
             try:
                 rows.append(bench_mesh(bpy, fname, scale_length, note, repeat, args.verbose))
             except Exception as exc:  # a benchmark reports, it does not stop at the first failure
-                print(f"   FAILED: {type(exc).__name__}: {exc}")
-                rows.append({"mesh": Path(fname).stem, "error": f"{type(exc).__name__}: {exc}".splitlines()[0]})
+                rows.append(benchutil.error_row("mesh", Path(fname).stem, exc))
                 clean_scene(bpy)
     finally:
         bolus_addon.unregister()
     total = time.perf_counter() - t_start
-    print_table(rows, repeat)
-    print(f"total bench time {total:.1f} s")
-    if args.json:
-        write_json(args.json, {
-            "repeat": repeat,
-            "segment_args": {"patches": PATCHES, "eta": ETA, "seed": SEED, "smoothing": "default"},
-            "target_ratio": TARGET_RATIO,
-            "memory_labels": {
-                "tracemalloc_peak_mb": "peak of Python objects and numpy buffers allocated during one segment call (tracemalloc)",
-                "rss_delta_mb": "process peak RSS (ru_maxrss, high-water mark reset before the call) minus RSS before the call",
-            },
-            "meshes": rows,
-            "total_s": total,
-        })
+    print(f"\nSummary. {legend(repeat)}.")
+    print(summary_table(rows).text())
+    if any(r["mesh"] == "demosthenes" for r in rows):
+        print("demosthenes is in normalised units; it is taken as 1 unit = 100 mm (scale_length 0.1).")
+    benchutil.finish(args, {
+        "repeat": repeat,
+        "segment_args": {"patches": PATCHES, "eta": ETA, "seed": SEED, "smoothing": "default"},
+        "target_ratio": TARGET_RATIO,
+        "memory_labels": {
+            "tracemalloc_peak_mb": "peak of Python objects and numpy buffers allocated during one segment call (tracemalloc)",
+            "rss_delta_mb": "process peak RSS (ru_maxrss, high-water mark reset before the call) minus RSS before the call",
+        },
+        "meshes": rows,
+    }, total, markdown(rows, repeat, argv))
     return 0
 
 
