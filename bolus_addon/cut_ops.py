@@ -13,27 +13,14 @@ import json
 import bpy
 import numpy as np
 
-from . import mesh_io
+from . import mesh_cuts, mesh_io
 from .core.colormap import categorical_linear_rgba
-from .core.cutlines import smooth_cuts
+from .core.cutlines import cut_region_check, patch_table, smooth_cuts
 from .core.errors import BolusError
-from .core.saliency import analyse
-from .core.spectral import patch_stats
-from .core.topology import MeshTopology
-from .operators import ATTR_PATCH, ATTR_PATCH_COLOR, PROP_PATCH_TABLE, BolusOperator, check_topology
+from .operators import ATTR_PATCH, ATTR_PATCH_COLOR, PROP_PATCH_TABLE, BolusOperator
 
-#: the note of a border left as it is because it is already a smooth cut (core.cutlines)
-ALREADY_SMOOTH = "already smooth"
 #: ours: one row per border (method, turning before/after, shift), read by the panel
 PROP_CUT_TABLE = "bolus_cut_table"
-
-
-def _stats(V, F, labels, smoothing_mm: float) -> list[dict]:
-    inside = labels >= 0
-    Fi = F[inside]
-    ana = analyse(V, Fi, smoothing_mm) if smoothing_mm > 0 else None
-    Va = ana.V_analysis if ana is not None else V
-    return [p.as_dict() for p in patch_stats(Va, Fi, labels[inside], V)]
 
 
 def format_cut_row(r: dict) -> str:
@@ -72,15 +59,10 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
         patch = poly_labels >= 0
         region = mesh_io.read_region(context, obj, polys=patch | mesh_io.polygons_next_to(me, patch))
         labels = poly_labels[region.tri_poly]
-        inside = labels >= 0
-        used, local = np.unique(region.F[inside], return_inverse=True)
-        topo = MeshTopology(region.V[used], local.reshape(-1, 3))  # the checks: on the patch faces only
-        warnings = region.warnings + check_topology(topo, allow_nonmanifold=False)
-        pairs = topo.face_adjacency_pairs
-        inner = labels[inside]
-        if len(np.unique(inner)) < 2 or not (inner[pairs[:, 0]] != inner[pairs[:, 1]]).any():
+        checked, why = cut_region_check(region.V, region.F, labels, region.vert_ids)  # on the patch faces only
+        warnings = region.warnings + checked
+        if why:
             self.warn_all(warnings)
-            why = ("there is only one patch" if len(np.unique(inner)) < 2 else "the patches do not share any border")
             self.report({"INFO"}, f"Nothing to smooth on '{obj.name}': {why} (Segment into Patches with 2 or more "
                                   "patches makes borders to smooth); the mesh was not changed")
             return {"FINISHED"}
@@ -101,10 +83,10 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
                 self.report({"INFO"}, format_cut_row(r))
             return {"FINISHED"}
         self.progress(0.8, "patch figures")
-        before = _stats(region.V, region.F, labels, smoothing)
-        after = _stats(res.V, res.F, res.labels, smoothing)
+        before = patch_table(region.V, region.F, labels, smoothing)
+        after = patch_table(res.V, res.F, res.labels, smoothing)
         with mesh_io.object_mode(obj):
-            new_labels = mesh_io.apply_cuts(me, region, res, ATTR_PATCH)
+            new_labels = mesh_cuts.apply_cuts(me, region, res, ATTR_PATCH)
             seams = mesh_io.polygon_edge_labels(me, new_labels)
             touched = mesh_io.edges_of_polygons(me, np.nonzero(new_labels >= 0)[0])
             mesh_io.set_seams(me, seams, touched)
@@ -118,15 +100,14 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
         obj[PROP_PATCH_TABLE] = json.dumps(table)
         obj[PROP_CUT_TABLE] = json.dumps(borders)
         self.warn_all(warnings)
-        changed = sum(r["method"] != "unchanged" for r in borders)
+        changed = sum(b.method != "unchanged" for b in res.borders)
         self.report(
             {"INFO"},
             f"Smoothed {changed} of {len(borders)} borders of '{obj.name}': {res.new_vertex_count} new vertices, "
             f"{int(res.split.sum())} triangles split",
         )
-        for r in borders:  # each border once: one that could not be smoothed is a warning
-            shortfall = r["method"] == "unchanged" and not r["note"].startswith(ALREADY_SMOOTH)
-            self.report({"WARNING"} if shortfall else {"INFO"}, format_cut_row(r))
+        for b in res.borders:  # each border once: one that could not be smoothed is a warning
+            self.report({"WARNING"} if b.shortfall else {"INFO"}, format_cut_row(b.as_dict()))
         for b_row, a_row in zip(before, after):
             self.report(
                 {"INFO"},

@@ -16,9 +16,10 @@ import bpy
 import numpy as np
 
 from .core.errors import BolusError
+from .core.remesh_maps import label_range
 from .core.topology import submesh
 
-__all__ = ["Region", "mm_per_unit", "world_mm", "read_region", "size_warning", "check_finite", "read_face_labels", "apply_cuts", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "polygons_next_to", "set_seams", "show_colors"]
+__all__ = ["Region", "mm_per_unit", "world_mm", "read_region", "size_warning", "check_finite", "read_face_labels", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "polygons_next_to", "set_seams", "show_colors"]
 
 
 def mm_per_unit(scene: bpy.types.Scene) -> float:
@@ -64,7 +65,7 @@ class Region:
         return self.obj.data
 
 
-def _get(coll, attr: str, n: int, dtype, width: int = 1) -> np.ndarray:
+def get_array(coll, attr: str, n: int, dtype, width: int = 1) -> np.ndarray:
     out = np.empty(n * width, dtype=dtype)
     coll.foreach_get(attr, out)
     return out.reshape(-1, width) if width > 1 else out
@@ -101,7 +102,7 @@ def read_region(context, obj: bpy.types.Object | None = None, polys: np.ndarray 
         if region_poly.shape != (npoly,) or not region_poly.any():
             raise BolusError(f"internal error: a region of {region_poly.sum()} of {npoly} polygons")
     elif obj.mode == "EDIT":
-        sel = _get(me.polygons, "select", npoly, bool)
+        sel = get_array(me.polygons, "select", npoly, bool)
         if sel.any():
             region_poly = sel
             selection_only = True
@@ -109,11 +110,11 @@ def read_region(context, obj: bpy.types.Object | None = None, polys: np.ndarray 
             warnings.append("No faces selected in Edit Mode: using the whole mesh")
     me.calc_loop_triangles()
     nt = len(me.loop_triangles)
-    tri_v = _get(me.loop_triangles, "vertices", nt, np.int64, 3)
-    tri_p = _get(me.loop_triangles, "polygon_index", nt, np.int64)
+    tri_v = get_array(me.loop_triangles, "vertices", nt, np.int64, 3)
+    tri_p = get_array(me.loop_triangles, "polygon_index", nt, np.int64)
     keep = region_poly[tri_p]
     tri_v, tri_p = tri_v[keep], tri_p[keep]
-    co = _get(me.vertices, "co", nv, np.float64, 3)
+    co = get_array(me.vertices, "co", nv, np.float64, 3)
     scale = mm_per_unit(context.scene)
     F, vert_ids = submesh(tri_v, slice(None))
     V = world_mm(co[vert_ids], obj, scale)
@@ -127,7 +128,7 @@ def read_region(context, obj: bpy.types.Object | None = None, polys: np.ndarray 
             warnings.append(f"{loose} loose vertices (in no face) were ignored")
         ne = len(me.edges)
         if ne:
-            loop_e = _get(me.loops, "edge_index", len(me.loops), np.int64)
+            loop_e = get_array(me.loops, "edge_index", len(me.loops), np.int64)
             edges_in_faces = np.zeros(ne, dtype=bool)
             edges_in_faces[loop_e] = True
             nloose = int(ne - edges_in_faces.sum())
@@ -240,7 +241,7 @@ def write_point_colors(me: bpy.types.Mesh, name: str, rgba: np.ndarray) -> None:
 
 def write_face_colors(me: bpy.types.Mesh, name: str, rgba_per_face: np.ndarray) -> None:
     """Flat colour per polygon, stored on corners (colour attributes have no face domain)."""
-    _, loop_p = _loop_edges_and_polygons(me)
+    _, loop_p = loop_edges_and_polygons(me)
     _write_colors(me, name, "CORNER", np.asarray(rgba_per_face)[loop_p])
 
 
@@ -262,31 +263,26 @@ def show_colors(me: bpy.types.Mesh, name: str) -> None:
     me.color_attributes.render_color_index = list(me.color_attributes).index(attr)
 
 
-def _loop_edges_and_polygons(me: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray]:
+def loop_edges_and_polygons(me: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray]:
     """(edge index, polygon index) of every loop (corner) of the mesh."""
     npoly = len(me.polygons)
-    loop_e = _get(me.loops, "edge_index", len(me.loops), np.int64)
-    starts = _get(me.polygons, "loop_start", npoly, np.int64)
-    totals = _get(me.polygons, "loop_total", npoly, np.int64)
+    loop_e = get_array(me.loops, "edge_index", len(me.loops), np.int64)
+    starts = get_array(me.polygons, "loop_start", npoly, np.int64)
+    totals = get_array(me.polygons, "loop_total", npoly, np.int64)
     order = np.argsort(starts, kind="stable")  # each polygon's loops are contiguous
     return loop_e, np.repeat(order, totals[order])
 
 
 def polygon_edge_labels(me: bpy.types.Mesh, poly_labels: np.ndarray) -> np.ndarray:
     """(e,) bool: mesh edges whose adjacent polygons carry different labels."""
-    loop_e, loop_p = _loop_edges_and_polygons(me)
-    lab = np.asarray(poly_labels, dtype=np.int64)[loop_p]
-    ne = len(me.edges)
-    lo = np.full(ne, np.iinfo(np.int64).max)
-    hi = np.full(ne, np.iinfo(np.int64).min)
-    np.minimum.at(lo, loop_e, lab)
-    np.maximum.at(hi, loop_e, lab)
-    return (hi > lo) & (hi != np.iinfo(np.int64).min)
+    loop_e, loop_p = loop_edges_and_polygons(me)
+    lo, hi, present = label_range(loop_e, np.asarray(poly_labels, dtype=np.int64)[loop_p], len(me.edges))
+    return present & (hi > lo)
 
 
 def edges_of_polygons(me: bpy.types.Mesh, poly_ids: np.ndarray) -> np.ndarray:
     """(e,) bool: the edges used by the given polygons."""
-    loop_e, loop_p = _loop_edges_and_polygons(me)
+    loop_e, loop_p = loop_edges_and_polygons(me)
     mark = np.zeros(len(me.polygons), dtype=bool)
     mark[poly_ids] = True
     out = np.zeros(len(me.edges), dtype=bool)
@@ -296,7 +292,7 @@ def edges_of_polygons(me: bpy.types.Mesh, poly_ids: np.ndarray) -> np.ndarray:
 
 def polygons_next_to(me: bpy.types.Mesh, mask: np.ndarray) -> np.ndarray:
     """(p,) bool: the polygons outside ``mask`` (p,) that share an edge with a polygon in it."""
-    loop_e, loop_p = _loop_edges_and_polygons(me)
+    loop_e, loop_p = loop_edges_and_polygons(me)
     edge_in = np.zeros(len(me.edges), dtype=bool)
     edge_in[loop_e[mask[loop_p]]] = True
     out = np.zeros(len(me.polygons), dtype=bool)
@@ -307,7 +303,7 @@ def polygons_next_to(me: bpy.types.Mesh, mask: np.ndarray) -> np.ndarray:
 def set_seams(me: bpy.types.Mesh, seam: np.ndarray, touched: np.ndarray) -> None:
     """Set use_seam = seam on the edges where ``touched`` is True; keep the others."""
     ne = len(me.edges)
-    cur = _get(me.edges, "use_seam", ne, bool)
+    cur = get_array(me.edges, "use_seam", ne, bool)
     new = np.where(touched, seam, cur)
     me.edges.foreach_set("use_seam", new)
 
@@ -349,239 +345,3 @@ def read_face_labels(data: bpy.types.Mesh | bpy.types.Object, name: str) -> np.n
     out = np.empty(len(me.polygons), dtype=np.int64)
     attr.data.foreach_get("value", out)
     return out
-
-
-def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.ndarray:
-    """Write a `core.cutlines.SmoothCutResult` into the mesh (object mode); returns polygon labels.
-
-    Polygons whose triangles were split (or got different labels) are replaced by the
-    result's triangles; every other polygon keeps its vertices, corners and data.  New
-    vertices get their data (vertex groups, point attributes) interpolated by Blender
-    from the polygon they lie in (``BMVert.copy_from_face_interp``); the corners of the
-    new faces (UV maps, corner colours and other corner attributes) are interpolated
-    here with the barycentric weights of the result in the input triangle they lie in
-    (`_interpolate_corners`: ``BMLoop/BMFace.copy_from_face_interp`` raise a SystemError
-    in Blender 4.2); new edges along a split edge copy that edge's data (seams,
-    sharpness, creases); ``label_attr`` (a FACE INT attribute) is set from
-    ``res.labels``.  The region (e.g. ``read_region(polys=patch faces)``) must have
-    been read from the mesh as it is; polygons outside it are not touched.
-    The selection and hidden state follow the region (`_carry_flags`): a new face is
-    selected (hidden) iff the polygon it came from was.
-    """
-    import bmesh
-
-    me.calc_loop_triangles()
-    tri_loops = _get(me.loop_triangles, "loops", len(me.loop_triangles), np.int64, 3)
-    if region.tri_index is None or len(region.tri_index) != len(region.F) or (
-        len(region.tri_index) and region.tri_index.max() >= len(tri_loops)
-    ):
-        raise BolusError("internal error: apply_cuts needs a region read from this mesh")
-    tri_loops = tri_loops[region.tri_index]
-    attr = me.attributes.get(label_attr)
-    if attr is not None and attr.data_type != "INT":  # e.g. INT8 from another tool: BMesh writes INT
-        write_attribute(me, label_attr, "INT", "FACE", read_face_labels(me, label_attr))
-    corner_data = _corner_attributes(me)
-    nv_old = len(me.vertices)
-    flags = _read_flags(me)
-
-    npoly = len(me.polygons)
-    tri_poly = region.tri_poly
-    out_poly = tri_poly[res.face_parent]  # (m',) polygon of every result face
-    replaced = np.zeros(npoly, dtype=bool)
-    replaced[tri_poly[res.split]] = True
-    lo = np.full(npoly, np.iinfo(np.int64).max)
-    hi = np.full(npoly, np.iinfo(np.int64).min)
-    np.minimum.at(lo, out_poly, res.labels)
-    np.maximum.at(hi, out_poly, res.labels)
-    replaced |= (hi > lo) & (hi != np.iinfo(np.int64).min)
-    poly_label = np.where(hi != np.iinfo(np.int64).min, hi, 0)
-
-    co = _get(me.vertices, "co", len(me.vertices), np.float64, 3)
-    bm = bmesh.new()
-    try:
-        bm.from_mesh(me)
-        bm.verts.ensure_lookup_table()
-        bm.faces.ensure_lookup_table()
-        layer = bm.faces.layers.int.get(label_attr) or bm.faces.layers.int.new(label_attr)
-        verts, faces = list(bm.verts), list(bm.faces)  # index tables go stale once we add
-        n_in = len(region.vert_ids)
-        vmap = [verts[int(i)] for i in region.vert_ids]
-        support = [frozenset((int(region.vert_ids[i]),)) for i in range(n_in)]
-        for j in range(n_in, len(res.V)):
-            src = region.vert_ids[res.vert_src[j]]
-            w = res.vert_weights[j]
-            v = bm.verts.new(tuple(w @ co[src]))
-            v.copy_from_face_interp(faces[int(tri_poly[res.vert_parent[j]])])
-            vmap.append(v)
-            support.append(frozenset(int(s) for s, x in zip(src, w) if x != 0.0))
-        old_faces = [faces[int(p)] for p in np.nonzero(replaced)[0]]
-        old_edges = {e for f in old_faces for e in f.edges}
-        for f in np.nonzero(~replaced & (hi != np.iinfo(np.int64).min))[0]:
-            faces[int(f)][layer] = int(poly_label[f])
-        new_faces = np.nonzero(replaced[out_poly])[0]
-        created = []
-        split_edges = []  # (new edge, the vertex pair of the input edge it is a piece of)
-        for k in new_faces.tolist():
-            src_face = faces[int(out_poly[k])]
-            tri = [int(i) for i in res.F[k]]
-            f = bm.faces.new([vmap[i] for i in tri], src_face)
-            f[layer] = int(res.labels[k])
-            created.append(f)
-            for a, b in ((0, 1), (1, 2), (2, 0)):
-                sa, sb = support[tri[a]], support[tri[b]]
-                both = sa | sb
-                if len(both) != 2 or (len(sa) == 1 and len(sb) == 1):
-                    continue  # not a piece of a split input edge
-                u, v = (verts[i] for i in both)
-                orig = bm.edges.get((u, v))
-                e = bm.edges.get((vmap[tri[a]], vmap[tri[b]]))
-                if orig is not None and e is not None and e is not orig:
-                    e.copy_from(orig)
-                    split_edges.append((e, tuple(both)))
-        bmesh.ops.delete(bm, geom=old_faces, context="FACES_ONLY")
-        for e in old_edges:
-            if e.is_valid and not e.link_faces:
-                bm.edges.remove(e)
-        bm.faces.index_update()
-        bm.edges.index_update()
-        created_index = np.array([f.index for f in created], dtype=np.int64)
-        kept_old = np.nonzero(~replaced)[0]
-        kept_new = np.array([faces[int(i)].index for i in kept_old], dtype=np.int64)
-        pieces = [(e.index, pair) for e, pair in split_edges if e.is_valid]
-        bm.to_mesh(me)
-    finally:
-        bm.free()
-    _interpolate_corners(me, region, res, new_faces, created_index, tri_loops, corner_data, nv_old)
-    _carry_flags(me, flags, nv_old, np.r_[kept_new, created_index], np.r_[kept_old, out_poly[new_faces]], pieces)
-    me.update()
-    return read_face_labels(me, label_attr)
-
-
-def _read_flags(me: bpy.types.Mesh) -> dict:
-    """Selection and hidden state of every vertex, edge and polygon, and the edges' vertices (object mode)."""
-    out = {"edge_verts": np.sort(_get(me.edges, "vertices", len(me.edges), np.int64, 2), axis=1)}
-    for kind, coll in (("vert", me.vertices), ("edge", me.edges), ("face", me.polygons)):
-        for flag in ("select", "hide"):
-            out[kind, flag] = _get(coll, flag, len(coll), bool)
-    return out
-
-
-def _carry_flags(me: bpy.types.Mesh, old: dict, nv_old: int, face_new: np.ndarray, face_src: np.ndarray,
-                 pieces: list) -> None:
-    """Make selection and hiding follow the region through `apply_cuts`' re-meshing.
-
-    ``old`` the `_read_flags` of the mesh before; vertices below ``nv_old`` are the old
-    ones; ``face_new`` (f,) every polygon of the new mesh, ``face_src`` (f,) the old
-    polygon it is or came from; ``pieces`` (new edge index, old edge's vertex pair).
-    A face is selected (hidden) iff its polygon was; an edge or vertex is selected iff it
-    lies on a selected face or was selected before (a piece of a selected edge too), and
-    hidden iff it was or, when new, iff all its faces are; nothing hidden is selected.
-    (``bmesh.ops.delete`` flushes the vertex selection into the faces, which scrambled it.)
-    """
-    npoly, nv, ne = len(me.polygons), len(me.vertices), len(me.edges)
-    fhide = np.zeros(npoly, dtype=bool)
-    fsel = np.zeros(npoly, dtype=bool)
-    fhide[face_new] = old["face", "hide"][face_src]
-    fsel[face_new] = old["face", "select"][face_src] & ~fhide[face_new]
-    loop_e, loop_p = _loop_edges_and_polygons(me)
-    loop_v = _get(me.loops, "vertex_index", len(me.loops), np.int64)
-    # old edges by their (sorted) vertex pair: an edge of the new mesh is old iff its pair was
-    old_keys = old["edge_verts"][:, 0] * nv + old["edge_verts"][:, 1]
-    order = np.argsort(old_keys)
-    sorted_keys = old_keys[order]
-
-    def old_edge_of(pairs: np.ndarray) -> np.ndarray:
-        """(k,) old edge index of each vertex pair (k,2), or -1."""
-        pairs = np.sort(pairs, axis=1)
-        keys = pairs[:, 0] * nv + pairs[:, 1]
-        pos = np.minimum(np.searchsorted(sorted_keys, keys), len(order) - 1)
-        return np.where(sorted_keys[pos] == keys, order[pos], -1)
-
-    edge_old = old_edge_of(_get(me.edges, "vertices", ne, np.int64, 2))
-    piece_old = np.full(ne, -1, dtype=np.int64)
-    if pieces:
-        piece_old[np.array([i for i, _ in pieces], dtype=np.int64)] = old_edge_of(np.array([p for _, p in pieces]))
-
-    def flags_of(n, elem_of_loop, was, kind):
-        """(select, hide) of n vertices or edges; was (n,) old index or -1."""
-        faces_at = np.bincount(elem_of_loop, minlength=n)
-        hidden_at = np.bincount(elem_of_loop, weights=fhide[loop_p], minlength=n)
-        on_sel = np.zeros(n, dtype=bool)
-        on_sel[elem_of_loop[fsel[loop_p]]] = True
-        hide = np.where(was >= 0, old[kind, "hide"][np.maximum(was, 0)], (faces_at > 0) & (hidden_at == faces_at))
-        sel = on_sel | ((was >= 0) & old[kind, "select"][np.maximum(was, 0)])
-        return sel & ~hide, hide
-
-    vert_old = np.where(np.arange(nv) < nv_old, np.arange(nv), -1)
-    vsel, vhide = flags_of(nv, loop_v, vert_old, "vert")
-    esel, ehide = flags_of(ne, loop_e, edge_old, "edge")
-    esel |= (piece_old >= 0) & old["edge", "select"][np.maximum(piece_old, 0)] & ~ehide
-    for coll, sel, hide in ((me.vertices, vsel, vhide), (me.edges, esel, ehide), (me.polygons, fsel, fhide)):
-        coll.foreach_set("hide", hide)
-        coll.foreach_set("select", sel)
-
-
-_CORNER_WIDTH = {"FLOAT": 1, "FLOAT2": 2, "FLOAT_VECTOR": 3, "FLOAT_COLOR": 4, "BYTE_COLOR": 4, "INT": 1,
-                 "INT8": 1, "BOOLEAN": 1, "INT32_2D": 2, "QUATERNION": 4}
-_CORNER_KEY = {"FLOAT": "value", "FLOAT2": "vector", "FLOAT_VECTOR": "vector", "FLOAT_COLOR": "color",
-               "BYTE_COLOR": "color", "INT": "value", "INT8": "value", "BOOLEAN": "value", "INT32_2D": "value",
-               "QUATERNION": "value"}
-
-
-def _corner_attributes(me: bpy.types.Mesh) -> dict:
-    """{name: (data_type, values (loops, width))} of the user-visible corner attributes."""
-    out = {}
-    for attr in me.attributes:
-        if attr.domain != "CORNER" or attr.name.startswith(".") or attr.data_type not in _CORNER_WIDTH:
-            continue
-        w = _CORNER_WIDTH[attr.data_type]
-        vals = np.empty(len(me.loops) * w, dtype=np.float64)
-        attr.data.foreach_get(_CORNER_KEY[attr.data_type], vals)
-        out[attr.name] = (attr.data_type, vals.reshape(-1, w))
-    return out
-
-
-def _interpolate_corners(me, region, res, new_faces, created_index, tri_loops, corner_data, nv_old) -> None:
-    """Corner attributes of the new faces from the input triangle each lies in.
-
-    A corner at result vertex j of a face lying in input triangle t gets
-    sum_c w_c * value(corner c of t), w = j's barycentric weights on t's corners;
-    integer and boolean attributes take the value of the corner with the largest weight.
-    """
-    if not corner_data or len(new_faces) == 0:
-        return
-    n_in = len(region.vert_ids)
-    core_of_mesh = np.full(len(me.vertices), -1, dtype=np.int64)
-    core_of_mesh[region.vert_ids] = np.arange(n_in)
-    core_of_mesh[nv_old:] = np.arange(n_in, n_in + len(me.vertices) - nv_old)
-    starts = _get(me.polygons, "loop_start", len(me.polygons), np.int64)[created_index]
-    loop_v = _get(me.loops, "vertex_index", len(me.loops), np.int64)
-    loops = starts[:, None] + np.arange(3)[None, :]  # (q,3) the new triangles' corners
-    j = core_of_mesh[loop_v[loops]]  # (q,3) result vertex of each corner
-    parent = res.face_parent[new_faces]  # (q,) input triangle of each new face
-    corners = region.F[parent]  # (q,3) input (region) vertices of the parent triangle
-    src = res.vert_src[j]  # (q,3,3)
-    w = res.vert_weights[j]
-    W = np.zeros((len(new_faces), 3, 3))  # corner x parent corner
-    for c in range(3):
-        W[:, :, c] = np.where(src == corners[:, None, c, None], w, 0.0).sum(axis=2)
-    W /= np.maximum(W.sum(axis=2, keepdims=True), 1e-300)
-    parent_loops = tri_loops[parent]  # (q,3)
-    for name, (dtype, vals) in corner_data.items():
-        pv = vals[parent_loops]  # (q,3 parent corners, width)
-        if dtype in {"INT", "INT8", "BOOLEAN", "INT32_2D"}:
-            pick = np.argmax(W, axis=2)  # (q,3)
-            new = np.take_along_axis(pv, pick[:, :, None], axis=1)
-        else:
-            new = np.einsum("qcp,qpw->qcw", W, pv)
-        attr = me.attributes[name]
-        out = np.empty(len(me.loops) * vals.shape[1], dtype=np.float64)
-        attr.data.foreach_get(_CORNER_KEY[dtype], out)
-        out = out.reshape(len(me.loops), -1)
-        out[loops.ravel()] = new.reshape(-1, vals.shape[1])
-        if dtype == "BOOLEAN":
-            attr.data.foreach_set("value", out.ravel().astype(bool))
-        elif dtype in {"INT", "INT8", "INT32_2D"}:
-            attr.data.foreach_set("value", np.rint(out.ravel()).astype(np.int32))
-        else:
-            attr.data.foreach_set(_CORNER_KEY[dtype], out.ravel().astype(np.float32))
