@@ -75,6 +75,27 @@ def test_operators_named_are_the_registered_ones(text):
     assert set(operator_table(text)) == ops, "the operator table lists every operator once"
 
 
+#: Blender's own menus and fields the steps name (not ours to check)
+BLENDER_UI = {"File ‣ Import ‣ STL", "Scale", "Scene Properties ‣ Units ‣ Unit Scale"}
+
+
+def test_sidebar_names_are_the_panels(text):
+    """Every button is named as the sidebar labels it, and every *name* in the steps is a
+    label of the panel, a property, a button, or one of Blender's own (BLENDER_UI)."""
+    ui = set()  # every string constant of the Blender layer (labels, names, table heads)
+    for path in (ROOT / "bolus_addon").glob("*.py"):
+        ui |= {n.value for n in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+               if isinstance(n, ast.Constant) and isinstance(n.value, str)}
+    flat = " ".join(text.split())
+    labels = set()
+    for path in (ROOT / "bolus_addon").glob("*.py"):
+        labels |= set(re.findall(r'bl_label\s*=\s*"([^"]+)"', path.read_text(encoding="utf-8")))
+    assert labels and all(label in flat for label in labels), sorted(lab for lab in labels if lab not in flat)
+    steps = flat[flat.index("## Step by step"):flat.index("## Scripting")]
+    named = {n.split(": ")[0] for n in re.findall(r"(?<![*\w])\*([^*]+)\*(?![*\w])", steps)}
+    assert named and not named - ui - BLENDER_UI, sorted(named - ui - BLENDER_UI)
+
+
 def test_what_is_not_there_yet_is_not_there(text):
     para = text[text.index("**Not there yet:**"):]
     para = para[:para.index("\n\n")]
