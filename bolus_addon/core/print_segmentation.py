@@ -9,10 +9,12 @@ Pipeline of `print_segmentation`:
 3. "abcut" (default): L = D - W, L' = F^-1/2 L F^-1/2 with F = diag(face areas)
    (eqs. 6-26..6-36), the k smallest eigenvectors U of L', U' = F^-1/2 U; "ratiocut"
    (the seed's "traditional method"): the k smallest eigenvectors of L itself;
-4. Gaussian mixture on the rows of the embedding: for "abcut" every row counts with its
-   face's area (the measure ABcut balances: the mixture is fitted on an area-weighted
-   resample of the rows), for "ratiocut" every row counts once
-   (``spectral.cluster_rows("gmm")``, the measure RatioCut balances);
+4. Gaussian mixture on the rows of the embedding (`clustering.cluster_rows`, the one
+   clustering step, shared with `spectral.segment`): for "abcut" every row counts with
+   its face's area (the measure ABcut balances), for "ratiocut" every row counts once
+   (the measure RatioCut balances); with ``face_groups`` (the polygon of each
+   triangle) the triangles of one polygon then take the label covering most of its
+   area (`spectral.vote_groups`);
 5. each cluster split into its edge-connected parts, parts below ``min_part_fraction``
    of the area merged into the neighbour with the longest shared border
    (``spectral.connected_patches``); parts numbered by decreasing area.
@@ -39,7 +41,11 @@ Choices where the seed is vague:
   (the seed's traditional method used the bare mesh graph).
 * faces of (nearly) zero area: F^-1/2 uses max(area, 1e-3 x median area).
 * the trivial first eigenvector (constant in U') carries no information and is
-  dropped before the Gaussian mixture; the embedding is scaled to unit RMS.
+  dropped before the Gaussian mixture; the embedding is scaled to unit RMS
+  (`clustering.standardise_rows`).
+* degenerate input: NaN/inf and bad indices are refused (`topology.check_mesh`);
+  zero-area triangles are sound (F^-1/2 floors their area, they weigh nothing in the
+  mixture), a mesh whose faces all have zero area is refused.
 * a mesh made of several separate pieces is allowed: every piece ends up in its own
   part(s), so the result can have more parts than asked.
 """
@@ -52,8 +58,8 @@ import scipy.sparse as sp
 
 from .errors import BolusError
 from .curvature import normal_curvature
-from .spectral import as_rng, cluster_rows, connected_patches, graph_laplacian, smallest_eigenvectors
-from .topology import MeshTopology
+from .spectral import as_rng, cluster_rows, connected_patches, graph_laplacian, smallest_eigenvectors, vote_groups
+from .topology import MeshTopology, check_mesh
 
 __all__ = [
     "METHODS",
@@ -156,6 +162,7 @@ def print_segmentation(
     concave_per_mm: float = 0.02,
     min_part_fraction: float = 0.05,
     clustering: str = "gmm",
+    face_groups=None,
     progress=None,
 ) -> PrintSegmentation:
     """Split the mesh V (n,3) mm, F (m,3) into about ``parts`` edge-connected print parts.
@@ -163,7 +170,9 @@ def print_segmentation(
     method "abcut" (area-balanced, eqs. 6-26..6-36) or "ratiocut" (unnormalised L).
     Parts below ``min_part_fraction`` of the area are merged into a neighbour, so the
     result can have fewer parts than asked (or more, when a cluster falls apart into
-    large pieces).  See the module doc for the weights.
+    large pieces).  ``face_groups`` (m,) int, optional: the polygon of each triangle;
+    a polygon's triangles end up in one part.  See the module doc for the weights.
+    Returns a `PrintSegmentation` (labels (m,) 0..p-1 by decreasing area).
     """
     report = progress or (lambda f, t: None)
     if method not in METHODS:
@@ -174,9 +183,11 @@ def print_segmentation(
         raise BolusError(f"the number of parts must be a whole number, got {parts!r}") from None
     if k != parts or k < 1:
         raise BolusError(f"ask for at least 1 part (a whole number), got {parts}")
-    topo = MeshTopology(V, F) if topo is None else topo
+    topo = MeshTopology(*check_mesh(V, F, nondegenerate=False, min_faces=0)) if topo is None else topo
     if topo.m == 0:
         raise BolusError("the mesh has no faces; select the faces to split")
+    if face_groups is not None and np.shape(face_groups) != (topo.m,):
+        raise BolusError(f"face groups must be one per triangle ({topo.m}), got shape {np.shape(face_groups)}")
     if topo.m < k:
         raise BolusError(f"the mesh has {topo.m} triangles, fewer than the {k} parts asked")
     total = float(topo.areas.sum())
@@ -200,46 +211,15 @@ def print_segmentation(
         else:
             vals, U = smallest_eigenvectors(L, k, rng)
         report(0.7, "clustering")
-        X = U - U.mean(axis=0)
-        sd = X.std(axis=0)
-        X = X[:, sd > 1e-9 * max(float(sd.max()), 1e-300)]
-        if X.shape[1] == 0:
-            X = U
-        X = X / (np.sqrt((X**2).mean()) or 1.0)
-        if method == "abcut":
-            clusters = _area_weighted_clusters(X, topo.areas, k, clustering, rng)
-        else:
-            clusters = cluster_rows(X, k, method=clustering, rng=rng)
+        # ABcut balances area: every row counts with its face's area; RatioCut counts rows
+        weights = topo.areas if method == "abcut" else None
+        clusters = cluster_rows(U, k, method=clustering, rng=rng, weights=weights)
+    if face_groups is not None:
+        clusters = vote_groups(clusters, face_groups, topo.areas)
     report(0.9, "parts")
     labels = connected_patches(topo, clusters, min_area=min_part_fraction * total)
     report(1.0, "done")
     return PrintSegmentation(labels, clusters, vals, U, method, k)
-
-
-def _area_weighted_clusters(X: np.ndarray, areas: np.ndarray, k: int, method: str, rng) -> np.ndarray:
-    """Cluster rows of X (m,d) into k labels (m,), each row counting with its face's area.
-
-    "gmm": the mixture (as ``spectral.cluster_rows``) is fitted on rows drawn with
-    probability proportional to area (max(m, 4096) draws, at most 50,000) and then
-    labels every row; "kmeans": KMeans with ``sample_weight`` = areas.
-    """
-    from sklearn.cluster import KMeans
-    from sklearn.mixture import GaussianMixture
-
-    rng = as_rng(rng)
-    w = np.asarray(areas, dtype=np.float64)
-    w = w / w.sum()
-    if method == "kmeans":
-        seed = int(rng.integers(0, 2**31 - 1))
-        km = KMeans(n_clusters=k, n_init=4, random_state=seed)
-        return km.fit_predict(X, sample_weight=w * len(w)).astype(np.int64)
-    if method != "gmm":
-        raise BolusError(f"unknown clustering method {method!r}; use 'gmm' or 'kmeans'")
-    draws = int(min(max(len(X), 4096), 50_000))
-    idx = rng.choice(len(X), size=draws, p=w)
-    seed = int(rng.integers(0, 2**31 - 1))
-    gm = GaussianMixture(n_components=k, covariance_type="full", n_init=3, random_state=seed, reg_covar=1e-6)
-    return gm.fit(X[idx]).predict(X).astype(np.int64)
 
 
 def print_segment(V, F, parts: int = 3, method: str = "abcut", rng=0, topo: MeshTopology | None = None,

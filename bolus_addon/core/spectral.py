@@ -36,6 +36,7 @@ import scipy.sparse as sp
 from scipy.linalg import eigh
 from scipy.sparse.linalg import eigsh
 
+from .clustering import cluster_rows  # re-exported: the one clustering step (clustering.py)
 from .errors import BolusError
 from .saliency import SaliencyResult, analyse, corner_angle_sums, flattenability, flattenability_value
 from .topology import MeshTopology, submesh  # submesh: re-exported (it lived here)
@@ -51,6 +52,7 @@ __all__ = [
     "smallest_eigenvectors",
     "cluster_rows",
     "faces_from_vertex_labels",
+    "vote_groups",
     "connected_patches",
     "patch_stats",
     "segment",
@@ -147,22 +149,34 @@ def smallest_eigenvectors(L: sp.spmatrix, k: int, rng=None) -> tuple[np.ndarray,
     return vals, vecs * signs
 
 
-def cluster_rows(U: np.ndarray, k: int, method: str = "kmeans", rng=None) -> np.ndarray:
-    """Cluster the rows of the spectral embedding U (n,d) into k labels (n,).
-
-    method: "kmeans" (scikit-learn KMeans, k-means++ seeding, 4 restarts) or "gmm" (GaussianMixture,
-    full covariances, 3 restarts).  Deterministic for a fixed ``rng``.
-    """
-    from sklearn.cluster import KMeans
-    from sklearn.mixture import GaussianMixture
-
-    seed = int(as_rng(rng).integers(0, 2**31 - 1))
-    if method == "kmeans":
-        return KMeans(n_clusters=k, n_init=4, random_state=seed).fit_predict(U).astype(np.int64)
-    if method == "gmm":
-        gm = GaussianMixture(n_components=k, covariance_type="full", n_init=3, random_state=seed, reg_covar=1e-9)
-        return gm.fit(U).predict(U).astype(np.int64)
-    raise BolusError(f"unknown clustering method {method!r}; use 'kmeans' or 'gmm'")
+def vote_groups(labels: np.ndarray, face_groups: np.ndarray, areas: np.ndarray | None = None) -> np.ndarray:
+    """One label per group: triangles with the same group id (the triangles of one
+    polygon), labels (m,) int >= 0, face_groups (m,) int, areas (m,) optional (default 1)
+    -> (m,) int64, each triangle given the label covering most of its group's area
+    (ties: the smaller label)."""
+    lab = np.asarray(labels, dtype=np.int64)
+    face_groups = np.asarray(face_groups)
+    if lab.shape != face_groups.shape or lab.ndim != 1:
+        raise BolusError(f"labels {lab.shape} and face groups {face_groups.shape} must be one per triangle")
+    if lab.size == 0:
+        return lab.copy()
+    if lab.min() < 0:
+        raise BolusError("labels to vote must be >= 0")
+    areas = np.ones(len(lab)) if areas is None else np.asarray(areas, dtype=np.float64)
+    # area of each (group, label) pair; the label with the largest area wins
+    nl = int(lab.max()) + 1
+    ukey, inv = np.unique(face_groups.astype(np.int64) * nl + lab, return_inverse=True)
+    uniq = np.stack([ukey // nl, ukey % nl], axis=1)
+    inv = inv.reshape(-1)
+    tot = np.bincount(inv, weights=areas)
+    order = np.lexsort((-tot, uniq[:, 0]))  # by group, largest area first
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = uniq[order[1:], 0] != uniq[order[:-1], 0]
+    groups, g_inv = np.unique(face_groups, return_inverse=True)
+    winner = np.empty(len(groups), dtype=np.int64)
+    winner[np.searchsorted(groups, uniq[order[first], 0])] = uniq[order[first], 1]
+    lab = winner[g_inv.reshape(-1)]
+    return lab.astype(np.int64)
 
 
 def faces_from_vertex_labels(
@@ -178,21 +192,7 @@ def faces_from_vertex_labels(
     a, b, c = L[:, 0], L[:, 1], L[:, 2]
     lab = np.where((a == b) | (a == c), a, np.where(b == c, b, np.minimum(np.minimum(a, b), c)))
     if face_groups is not None:
-        face_groups = np.asarray(face_groups)
-        areas = np.ones(len(F)) if areas is None else areas
-        # area of each (group, label) pair; the label with the largest area wins
-        nl = int(lab.max()) + 1
-        ukey, inv = np.unique(face_groups.astype(np.int64) * nl + lab, return_inverse=True)
-        uniq = np.stack([ukey // nl, ukey % nl], axis=1)
-        inv = inv.reshape(-1)
-        tot = np.bincount(inv, weights=areas)
-        order = np.lexsort((-tot, uniq[:, 0]))  # by group, largest area first
-        first = np.ones(len(order), dtype=bool)
-        first[1:] = uniq[order[1:], 0] != uniq[order[:-1], 0]
-        groups, g_inv = np.unique(face_groups, return_inverse=True)
-        winner = np.empty(len(groups), dtype=np.int64)
-        winner[np.searchsorted(groups, uniq[order[first], 0])] = uniq[order[first], 1]
-        lab = winner[g_inv.reshape(-1)]
+        lab = vote_groups(lab, face_groups, areas)
     return lab.astype(np.int64)
 
 
