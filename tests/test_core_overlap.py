@@ -214,3 +214,68 @@ def test_flattened_cut_knee_is_clean_until_a_vertex_is_pushed_over():
     UV[v] = UV[w] + 1.5 * (UV[w] - UV[v])
     s = overlap_summary(UV, cut.F, loops)
     assert not s["ok"] and s["flipped_faces"] > 0 and s["overlapping_faces"] >= s["flipped_faces"]
+
+
+# ------------------------------------------------------------ degenerate input (issue 10 point 4)
+def coincident_pattern():
+    """A flat 4 x 4 grid whose vertices 6 and 7 coincide: two collapsed (zero-area) triangles."""
+    UV, F = flat(4, 4, 40.0)
+    UV[7] = UV[6]
+    return UV, F
+
+
+def test_coincident_vertices_collapse_triangles_that_count_as_flipped():
+    UV, F = coincident_pattern()
+    A = signed_areas(UV, F)
+    collapsed = np.abs(A) < 1e-12
+    assert collapsed.sum() == 2 and np.isfinite(A).all()
+    assert np.array_equal(flipped_faces(UV, F), collapsed)  # documented: a collapsed triangle is a fold
+    # touching, not overlapping: the collapsed triangles lie on their neighbours' edge
+    assert not overlapping_faces(UV, F).any()
+    assert len(boundary_self_intersections(UV, F)) == 0
+    s = overlap_summary(UV, F)
+    assert s == {"flipped_faces": 2, "overlapping_faces": 0, "boundary_crossings": 0, "ok": False}
+
+
+def test_needle_triangles_are_neither_flipped_nor_overlapping():
+    UV, F = flat(4, 4, 40.0)
+    UV[7] = UV[6] + [0.0, 1e-3]  # needles of 1 um next to 10 mm sides, still counter-clockwise
+    assert (signed_areas(UV, F) > 0).all()
+    assert overlap_summary(UV, F)["ok"]
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_coordinates_are_refused_by_name(bad):
+    UV, F = flat(3, 3)
+    UV[9, 1] = bad
+    for fn in (signed_areas, flipped_faces, overlapping_faces, overlapping_face_pairs, boundary_self_intersections,
+               overlap_summary):
+        with pytest.raises(BolusError, match="non-finite.*vertex 9"):
+            fn(UV, F)
+    with pytest.raises(BolusError, match="point 9 of a segment is not finite"):
+        segment_intersections(UV, [[8, 9], [0, 5]])
+    with pytest.raises(BolusError, match="box 1 has a non-finite"):
+        candidate_pairs(UV[[0, 9]], UV[[0, 9]] + 1)
+    with pytest.raises(BolusError, match="point 0 is not finite"):
+        point_in_polygon(UV[[9]], UV[[0, 3, 15]])
+    with pytest.raises(BolusError, match="polygon corner 1 is not finite"):
+        point_in_polygon(UV[[0]], UV[[0, 9, 15]])
+
+
+def test_repeated_vertex_and_bad_indices_are_refused_by_triangle():
+    UV, F = flat(3, 3)
+    F = F.copy()
+    F[4] = [5, 5, 6]
+    with pytest.raises(BolusError, match="triangle 4 repeats one of its vertices"):
+        flipped_faces(UV, F)
+    with pytest.raises(BolusError, match="triangle 2 refers to a vertex index outside"):
+        overlapping_faces(UV, np.r_[[[0, 1, 2]], [[0, 1, 2]], [[0, 1, -1]]])
+
+
+def test_non_manifold_edge_fold_is_an_overlap_and_not_a_boundary_edge():
+    """Three triangles on edge 0-1, two of them on the same side: a fold-over (sound result)."""
+    UV = np.array([[0.0, 0], [10, 0], [5, 8], [5, -8], [4, 6]])
+    F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    assert overlapping_faces(UV, F).tolist() == [True, False, True]
+    E = boundary_edge_array(F)
+    assert not any(set(e) == {0, 1} for e in E.tolist()) and len(E) == 6

@@ -17,6 +17,7 @@ from bolus_addon.core.pattern_svg import (
     signed_area,
     svg_outline_paths,
 )
+from bolus_addon.core.polygon_offset import winding_numbers
 
 NS = {"svg": "http://www.w3.org/2000/svg"}
 
@@ -342,3 +343,57 @@ def test_svg_bad_input():
         pattern_svg([{"UV": UV, "F": F}], seam_allowance_mm=-1)
     with pytest.raises(BolusError):
         svg_outline_paths("<svg")
+
+
+# ------------------------------------------------------------------ degenerate input (issue 10 point 4)
+def test_outline_with_coincident_vertices_and_needles_is_sound():
+    """Collapsed and needle triangles do not change the outline: its area is the pattern's."""
+    UV, F = grid_with_hole()
+    for gap in (0.0, 1e-3):  # coincident (two zero-area triangles), then needles
+        W = UV.copy()
+        W[8] = W[1] + [gap, 0.0]  # an interior vertex moved onto / next to a border vertex
+        loops = outline_loops(W, F)
+        area = 0.5 * cross2d(W[F[:, 1]] - W[F[:, 0]], W[F[:, 2]] - W[F[:, 0]]).sum()
+        assert len(loops) == 2 and sum(signed_area(L) for L in loops) == pytest.approx(area, rel=1e-12)
+        assert all(np.isfinite(L).all() for L in loops)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_non_finite_pattern_is_refused_by_name(bad):
+    UV, F = grid_with_hole()
+    UV = UV.copy()
+    UV[10, 0] = bad
+    for fn in (outline_loops, outline_loop_indices):
+        with pytest.raises(BolusError, match="non-finite.*vertex 10"):
+            fn(UV, F)
+    with pytest.raises(BolusError, match="non-finite.*vertex 10"):
+        pattern_svg([{"UV": UV, "F": F, "label": "x"}])
+    P = np.array([[0.0, 0], [10, 0], [10, 10], [0, 10]])
+    P[2, 1] = bad
+    with pytest.raises(BolusError, match="corner 2 is not finite"):
+        offset_polygon(P, 1.0)
+    with pytest.raises(BolusError, match="offset distance is not finite"):
+        offset_polygon(P[[0, 1, 3]], bad)
+    with pytest.raises(BolusError, match="point 1 is not finite"):
+        winding_numbers(P[[0, 2]], P[[0, 1]], P[[1, 3]])
+    with pytest.raises(BolusError, match="margin must be a length"):
+        pattern_svg([{"UV": UV[:3] * 0 + [[0, 0], [1, 0], [0, 1]], "F": [[0, 1, 2]]}], margin_mm=bad)
+
+
+def test_non_manifold_pattern_and_closed_piece_are_refused():
+    UV = np.array([[0.0, 0], [10, 0], [5, 8], [5, -8], [4, 6]])
+    with pytest.raises(BolusError, match="shared by more than two faces"):
+        outline_loops(UV, [[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    V = np.array([[0.0, 0], [1, 0], [0, 1], [1, 1]])
+    with pytest.raises(BolusError, match="no boundary"):  # a tetrahedron's faces, flattened
+        outline_loops(V, [[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]])
+
+
+def test_offset_of_polygons_with_coincident_corners_and_needle_spikes():
+    sq = np.array([[0.0, 0], [10, 0], [10, 0], [10, 10], [0, 10], [0, 10]])  # two corners given twice
+    np.testing.assert_allclose(offset_polygon(sq, 2.0), [[-2, -2], [12, -2], [12, 12], [-2, 12]], atol=1e-12)
+    # a needle spike (1 um wide, 20 mm long) out of a square: the miter is cut square, the result simple
+    spike = np.array([[0.0, 0], [10, 0], [10, 5], [30, 5.0005], [10, 5.001], [10, 10], [0, 10]])
+    out = offset_polygon(spike, 1.0)
+    assert is_simple(out) and signed_area(out) > signed_area(spike)
+    assert out[:, 0].max() <= 30 + 2.0 * 1.0 + 1e-9  # never past MITER_LIMIT * d from the tip

@@ -125,6 +125,9 @@ def candidate_pairs(lo, hi, tol: float = 0.0) -> np.ndarray:
     """
     lo = np.asarray(lo, dtype=np.float64) - tol
     hi = np.asarray(hi, dtype=np.float64) + tol
+    bad = np.nonzero(~(np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)))[0] if lo.size else []
+    if len(bad):
+        raise BolusError(f"box {int(bad[0])} has a non-finite (NaN or infinite) corner")
     k = len(lo)
     if k < 2:
         return np.zeros((0, 2), dtype=np.int64)
@@ -184,10 +187,14 @@ def segment_intersections(P, E, rel_tol: float = REL_TOL, scale: float | None = 
 
     Proper: each segment has the other's ends strictly on opposite sides, beyond
     rel_tol * scale^2 (scale defaults to the mean segment length).  Segments sharing a
-    vertex index are skipped; touching and collinear overlaps are not reported.
+    vertex index are skipped; touching and collinear overlaps are not reported, nor are
+    zero-length segments (coincident points).  BolusError for a non-finite point.
     """
     P = np.asarray(P, dtype=np.float64)
     E = np.asarray(E, dtype=np.int64).reshape(-1, 2)
+    bad = np.nonzero(~np.isfinite(P[np.unique(E)]).all(axis=1))[0] if len(E) else []
+    if len(bad):
+        raise BolusError(f"point {int(np.unique(E)[bad[0]])} of a segment is not finite (NaN or infinite)")
     if len(E) < 2:
         return np.zeros((0, 2), dtype=np.int64)
     A, B = P[E[:, 0]], P[E[:, 1]]
@@ -306,9 +313,14 @@ def point_in_polygon(points, polygon) -> np.ndarray:
     """(k,) bool: points (k,2) strictly inside the closed polygon (p,2), even-odd rule.
 
     Points exactly on the outline may go either way.  Vectorised over points x edges.
+    BolusError for a non-finite polygon corner or point.
     """
     Q = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    A = np.asarray(polygon, dtype=np.float64)
+    A = np.asarray(polygon, dtype=np.float64).reshape(-1, 2)
+    for what, X in (("point", Q), ("polygon corner", A)):
+        bad = np.nonzero(~np.isfinite(X).all(axis=1))[0]
+        if len(bad):
+            raise BolusError(f"{what} {int(bad[0])} is not finite (NaN or infinite)")
     B = np.roll(A, -1, axis=0)
     inside = np.zeros(len(Q), dtype=bool)
     step = max(1, _CHUNK // max(len(Q), 1))

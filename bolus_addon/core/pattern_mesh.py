@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import BolusError
-from .overlap import signed_areas
+from .overlap import as_pattern_arrays, signed_areas
 from .piece_advice import DEFAULT_WARN_FRACTION, piece_advice
 from .saliency import DEFAULT_SMOOTHING_MM
 from .topology import MeshTopology, check_mesh, face_areas, submesh
@@ -329,12 +329,18 @@ def svg_pieces(P, F, tri_poly, poly_patch, table: dict | None = None) -> list[di
     P = np.asarray(P, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] < 2:
         raise BolusError(f"pattern positions must be an (n, 2) array, got shape {P.shape}")
-    tri_patch = np.asarray(poly_patch, dtype=np.int64)[np.asarray(tri_poly, dtype=np.int64)]
+    P, F = as_pattern_arrays(P[:, :2], F)
+    tri_poly = np.asarray(tri_poly, dtype=np.int64)
+    poly_patch = np.asarray(poly_patch, dtype=np.int64)
+    if tri_poly.shape != (len(F),) or (len(F) and (tri_poly.min() < 0 or tri_poly.max() >= len(poly_patch))):
+        raise BolusError(f"the pattern needs one polygon per triangle ({len(F)}) among its {len(poly_patch)} "
+                         f"polygons, got {tri_poly.shape[0]} values")
+    tri_patch = poly_patch[tri_poly]
     table = table or {}
     pieces = []
     for p in np.unique(tri_patch):
         Fp, verts = submesh(F, tri_patch == p)
         row = table.get(int(p), {})
-        pieces.append({"UV": P[verts, :2], "F": Fp, "label": f"Patch {int(p)}", "EL": row.get("EL"),
+        pieces.append({"UV": P[verts], "F": Fp, "label": f"Patch {int(p)}", "EL": row.get("EL"),
                        "EA": row.get("EA")})
     return pieces

@@ -52,9 +52,13 @@ def winding_numbers(Q, A, B) -> np.ndarray:
     """Winding numbers (t,) int of points Q (t,2) about the directed segments A -> B (s,2).
 
     For closed loops this is the usual winding number (0 outside); points on a segment
-    may count either way.
+    may count either way.  BolusError for a non-finite point or segment end.
     """
     Q, A, B = (np.asarray(X, dtype=np.float64).reshape(-1, 2) for X in (Q, A, B))
+    for what, X in (("point", Q), ("segment start", A), ("segment end", B)):
+        bad = np.nonzero(~np.isfinite(X).all(axis=1))[0]
+        if len(bad):
+            raise BolusError(f"{what} {int(bad[0])} is not finite (NaN or infinite)")
     w = np.zeros(len(Q), dtype=np.int64)
     if len(A) == 0:
         return w
