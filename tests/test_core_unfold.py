@@ -193,14 +193,14 @@ def test_progress_is_reported_inside_long_minimisations():
     UV0 = initial_unfolding(topo) * 1.3  # far from rest: many iterations
     seen = []
     clock = iter(range(10**6))
-    import bolus_addon.core.unfold as unfold_mod
+    import bolus_addon.core.relax as relax_mod
 
-    real = unfold_mod.time.perf_counter
+    real = relax_mod.time.perf_counter
     try:  # a clock that advances 1 s per reading: every iteration is "0.5 s later"
-        unfold_mod.time.perf_counter = lambda: float(next(clock))
+        relax_mod.time.perf_counter = lambda: float(next(clock))
         _, it, _ = relax_lbfgs(UV0, springs, max_iter=30, tol=0.0, progress=seen.append)
     finally:
-        unfold_mod.time.perf_counter = real
+        relax_mod.time.perf_counter = real
     assert it >= 5 and len(seen) >= it - 2
     assert all(0 < f <= 1 for f in seen) and seen == sorted(seen)
 
@@ -243,19 +243,19 @@ def test_explicit_integrator_reports_progress():
     masses = np.bincount(F.ravel(), weights=np.repeat(topo.areas / 3, 3), minlength=topo.n)
     seen = []
     clock = iter(range(10**6))
-    import bolus_addon.core.unfold as unfold_mod
+    import bolus_addon.core.relax as relax_mod
 
-    real = unfold_mod.time.perf_counter
+    real = relax_mod.time.perf_counter
     try:
-        unfold_mod.time.perf_counter = lambda: float(next(clock))
+        relax_mod.time.perf_counter = lambda: float(next(clock))
         relax_explicit(initial_unfolding(topo), springs, masses, max_iter=1000, tol=0.0, progress=seen.append)
     finally:
-        unfold_mod.time.perf_counter = real
+        relax_mod.time.perf_counter = real
     assert len(seen) >= 5 and seen == sorted(seen) and 0 < seen[0] and seen[-1] <= 1
 
 
 def test_a_local_fold_is_untangled_without_a_global_round():
-    from bolus_addon.core.unfold import _untangle
+    from bolus_addon.core.overlap_correction import untangle
 
     V, F = grid(20, 20)
     topo = MeshTopology(V, F)
@@ -263,17 +263,17 @@ def test_a_local_fold_is_untangled_without_a_global_round():
     v = 10 * 21 + 10  # an interior vertex pushed far across its neighbours: a fold
     UV[v] += [12.0, 9.0]
     assert np.count_nonzero(signed_areas(UV, F) <= 0) > 0
-    X, flips = _untangle(UV, topo)
+    X, flips = untangle(UV, topo)
     assert flips == 0 and np.count_nonzero(signed_areas(X, F) <= 0) == 0
     far = np.linalg.norm(V[:, :2] - V[v, :2], axis=1) > 30.0
     np.testing.assert_array_equal(X[far], UV[far])  # only the neighbourhood of the fold moved
 
 
 def test_outline_crossing_is_corrected_locally():
-    """A strip laid on a circle of 1.04 turns: its two ends overlap.  `_local_outline` moves
+    """A strip laid on a circle of 1.04 turns: its two ends overlap.  `local_outline` moves
     only the vertices near the ends apart; the middle of the strip stays exactly in place."""
     from bolus_addon.core.overlap import boundary_self_intersections
-    from bolus_addon.core.unfold import _local_outline
+    from bolus_addon.core.overlap_correction import local_outline
 
     V, F = grid(60, 3, 60.0)
     V[:, 1] *= 3.0 / 60.0  # a 60 x 3 mm strip
@@ -283,7 +283,7 @@ def test_outline_crossing_is_corrected_locally():
     if signed_areas(UV, F).sum() < 0:
         UV[:, 0] = -UV[:, 0]
     assert len(boundary_self_intersections(UV, F)) and overlapping_faces(UV, F).sum() > 0
-    X, _, crossings = _local_outline(UV, build_springs(topo), topo)
+    X, _, crossings = local_outline(UV, build_springs(topo), topo)
     assert crossings == 0 and len(boundary_self_intersections(X, F)) == 0
     assert overlapping_faces(X, F).sum() == 0 and np.count_nonzero(signed_areas(X, F) <= 0) == 0
     middle = np.abs(V[:, 0] - 30.0) < 15.0
@@ -329,27 +329,26 @@ def test_errors_are_relative_to_the_skin_not_the_pattern():
     assert (el, ea, flipped) == (pytest.approx(1.0, rel=1e-12), pytest.approx(3.0, rel=1e-12), 0)
 
 
-def test_crossed_springs_are_in_the_model_and_earn_their_keep(monkeypatch):
+def test_crossed_springs_are_in_the_model_and_earn_their_keep():
     """Crossed springs (3.5) join the two vertices opposite every interior edge, rest length
     the pair hinged flat, CROSSED_WEIGHT = 3 times the tension stiffness 1/D; without
     refinement they lower the length error of a 60 degree cap (3.99 % against 4.06 % with
     them switched off, measured)."""
-    import bolus_addon.core.unfold as unfold
+    import bolus_addon.core.springs as springs_mod
 
     V = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0], [10.0, 10.0, 5.0]])
     F = np.array([[0, 1, 2], [2, 1, 3]])
-    springs = unfold.build_springs(MeshTopology(V, F))
+    springs = build_springs(MeshTopology(V, F))
     assert springs.n_tension == 5 and len(springs.ends) == 6  # five edges, one crossed spring
     assert sorted(springs.ends[5].tolist()) == [0, 3]
-    hinge = unfold._hinge_distance(V, np.array([1]), np.array([2]), np.array([0]), np.array([3]))[0]
+    hinge = springs_mod._hinge_distance(V, np.array([1]), np.array([2]), np.array([0]), np.array([3]))[0]
     assert springs.rest[5] == pytest.approx(hinge)
     assert hinge > np.linalg.norm(V[3] - V[0])  # hinged flat: longer than the 3D chord
-    assert unfold.CROSSED_WEIGHT == 3.0
-    assert springs.stiffness[5] == pytest.approx(unfold.CROSSED_WEIGHT / hinge)
+    assert springs_mod.CROSSED_WEIGHT == 3.0
+    assert springs.stiffness[5] == pytest.approx(springs_mod.CROSSED_WEIGHT / hinge)
     Vc, Fc = spherical_cap(R=100.0, half_angle_deg=60.0, subdivisions=4)
-    with_crossed = unfold.unfold_patch(Vc, Fc, refine_rounds=0).EL
-    monkeypatch.setattr(unfold, "CROSSED_WEIGHT", 0.0)
-    without = unfold.unfold_patch(Vc, Fc, refine_rounds=0).EL
+    with_crossed = unfold_patch(Vc, Fc, refine_rounds=0).EL
+    without = unfold_patch(Vc, Fc, refine_rounds=0, crossed_springs=False).EL
     assert with_crossed < without - 0.0003
 
 
