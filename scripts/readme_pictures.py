@@ -16,8 +16,9 @@ screenshot its own UI in background mode, so there is no picture of the panel it
                                (blue shrunk, white exact, red stretched, +-10 %)
     4_pattern_svg.png          Export Pattern (SVG): the file's paths, lines and texts drawn
                                in Blender (solid cut lines, dashed 5 mm seam allowance, 50 mm bar)
-    5_print_parts.png          Split into Print Parts, Orient Print Parts: the parts on the
-                               build plate, faces that need support in red
+    5_print_parts.png          Split into Print Parts (the parts on the face, close-up)
+                               | Orient Print Parts: the parts on the build plate, faces
+                               that need support in red
 
 Every picture is 800 px wide, RGB, rendered without dithering and with the Standard view
 transform (the colours are the colour maps' own), written by a small PNG writer (64 levels
@@ -277,9 +278,15 @@ def main():
     demo.run_op(bpy.ops.bolus.print_segment, parts=3, method="ABCUT", seed=0)
     demo.run_op(bpy.ops.bolus.orient_parts)
     bpy.ops.object.mode_set(mode="OBJECT")
-    set_resolution(WIDTH_PX, PANEL_HEIGHT_PX)
-    demo.render_parts([obj, pattern], part_objects(obj.name), tmp / "parts.png")
-    write_png(out / "5_print_parts.png", read_png(tmp / "parts.png"))
+    set_resolution(half, PANEL_HEIGHT_PX)
+    parts = part_objects(obj.name)
+    for ob in (pattern, *parts):  # they lie on z = 0, in front of the face's close-up
+        ob.hide_render = True
+    demo.render_closeup(obj, "bolus_print_part_color", tmp / "split.png")
+    for ob in (pattern, *parts):
+        ob.hide_render = False
+    demo.render_parts([obj, pattern], parts, tmp / "parts.png")
+    side_by_side([tmp / "split.png", tmp / "parts.png"], out / "5_print_parts.png")
 
     table = json.loads(pattern["bolus_pattern_table"])
     orient = json.loads(obj["bolus_orient_table"])
