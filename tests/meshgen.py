@@ -203,3 +203,39 @@ def graded_strip(length=200.0, width=20.0, coarse_cells=10, fine_cells=160, ny=4
     V = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], axis=1)
     _, F = grid(len(xs) - 1, ny)
     return V, F
+
+
+def degenerate_variants(V, F):
+    """Broken copies of a mesh V (n,3), F (m,3) (triangle 0 must be interior-ish), for the
+    degenerate-input tests of every public core function (issue 10):
+    {name: (V', F', what the refusal must say, or None where the mesh is sound)}.
+
+    coincident: a vertex duplicated onto another and used in a new triangle (zero area);
+    collinear: a new triangle whose three corners lie on a line; nan / inf: one vertex
+    non-finite; needle: a new triangle with a 0.01 degree angle (positive area: sound);
+    nonmanifold: a third triangle on an interior edge.
+    """
+    V = np.asarray(V, dtype=float)
+    F = np.asarray(F, dtype=np.int64)
+    n = len(V)
+    a, b, c = (int(x) for x in F[0])
+    e = V[b] - V[a]
+    out = {}
+    out["coincident"] = (np.r_[V, V[b][None]], np.r_[F, [[a, b, n]]], "zero-area")
+    out["collinear"] = (np.r_[V, [V[a] - e, V[a] - 2 * e]], np.r_[F, [[a, n, n + 1]]], "zero-area")
+    Vn = V.copy()
+    Vn[c, 0] = np.nan
+    out["nan"] = (Vn, F.copy(), f"vertex {c}")
+    Vi = V.copy()
+    Vi[c, 2] = np.inf
+    out["inf"] = (Vi, F.copy(), f"vertex {c}")
+    side = np.cross(e, V[c] - V[a])
+    side = np.cross(side, e)
+    side /= np.linalg.norm(side) + 1e-300
+    out["needle"] = (np.r_[V, [V[a] - side * np.linalg.norm(e) * 1e-4 + e * 0.5]], np.r_[F, [[b, a, n]]], None)
+    E = np.sort(np.c_[F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]].reshape(-1, 2), axis=1)
+    keys, counts = np.unique(E, axis=0, return_counts=True)
+    p, q = (int(x) for x in keys[np.argmax(counts == 2)])  # an interior edge
+    top = 0.5 * (V[p] + V[q]) + np.r_[0.0, 0.0, np.linalg.norm(V[q] - V[p])]
+    out["nonmanifold"] = (np.r_[V, top[None]], np.r_[F, [[p, q, n]]], "non-manifold")
+    return out

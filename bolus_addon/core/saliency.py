@@ -34,7 +34,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import cg, splu
 
 from .errors import BolusError
-from .topology import MeshTopology, corner_angles
+from .topology import MeshTopology, as_mesh_arrays, corner_angles, face_areas, refuse_zero_area, zero_area_mask
 
 __all__ = [
     "DEFAULT_SMOOTHING_MM",
@@ -81,14 +81,18 @@ def cotangent_stiffness(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:
     """Cotangent stiffness matrix K (n,n), positive semi-definite, rows summing to 0.
 
     K_ij = -(cot a_ij + cot b_ij) / 2 for an edge ij with opposite angles a, b.
+    V (n,3), F (m,3).  A zero-area triangle has no cotangents: `BolusError` names it.
     """
+    V, F = as_mesh_arrays(V, F)
     n = len(V)
+    cr = 2.0 * face_areas(V, F)
+    sides = np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2)
+    refuse_zero_area(F, zero_area_mask(0.5 * cr, sides.ravel()))
     rows, cols, vals = [], [], []
     for k in range(3):
         i, j, o = F[:, (k + 1) % 3], F[:, (k + 2) % 3], F[:, k]
         u, w = V[i] - V[o], V[j] - V[o]
-        cr = np.linalg.norm(np.cross(u, w), axis=1)
-        cot = np.einsum("ij,ij->i", u, w) / np.maximum(cr, 1e-300)
+        cot = np.einsum("ij,ij->i", u, w) / cr
         rows += [i, j]
         cols += [j, i]
         vals += [-0.5 * cot, -0.5 * cot]
@@ -99,8 +103,12 @@ def cotangent_stiffness(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:
 
 
 def lumped_mass(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Barycentric lumped mass (n,): a third of the one-ring triangle areas (cf. eq. 3-24)."""
-    A = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+    """Barycentric lumped mass (n,): a third of the one-ring triangle areas (cf. eq. 3-24).
+
+    V (n,3), F (m,3); the one implementation of the lumped mass in the core.  Zero-area
+    triangles add nothing (sound: a vertex only on them gets mass 0)."""
+    V, F = as_mesh_arrays(V, F)
+    A = face_areas(V, F)
     return np.bincount(F.ravel(), weights=np.repeat(A / 3.0, 3), minlength=len(V))
 
 

@@ -23,6 +23,8 @@ __all__ = [
     "MeshTopology",
     "as_mesh_arrays",
     "check_mesh",
+    "zero_area_mask",
+    "refuse_zero_area",
     "submesh",
     "triangulate_polygons",
     "face_areas",
@@ -61,6 +63,40 @@ def as_mesh_arrays(V, F) -> tuple[np.ndarray, np.ndarray]:
             raise BolusError(f"{len(rep)} triangle(s) with a repeated vertex: triangle {int(rep[0])} repeats one of "
                              "its vertices (degenerate face)")
     return V, F
+
+
+#: a triangle is "zero-area" below this times the squared median edge length: far
+#: below any scan's noise, so only coincident or collinear corners are caught
+ZERO_AREA_REL = 1e-10
+
+
+def zero_area_mask(areas, edge_lengths, rel_tol: float = ZERO_AREA_REL) -> np.ndarray:
+    """(m,) bool: areas (m,) below rel_tol * median(edge_lengths)^2 (the one zero-area test)."""
+    areas = np.asarray(areas, dtype=np.float64)
+    if len(areas) == 0:
+        return np.zeros(0, dtype=bool)
+    L = float(np.median(edge_lengths)) if len(edge_lengths) else 0.0
+    return areas <= rel_tol * L * L
+
+
+def refuse_zero_area(F, bad, what: str = "the mesh", vert_ids=None) -> None:
+    """Raise BolusError naming the first triangle of F (m,3) where bad (m,) bool is set.
+
+    Such a triangle (coincident or collinear vertices) has no angles and no shape, so
+    angle sums (eq. 4-1), cotangent weights and springs (eq. 3-22) are undefined on it.
+    vert_ids (n,) int, optional: the user's index of each vertex (the message names
+    those, e.g. Blender's vertex indices of a selected region)."""
+    bad = np.nonzero(bad)[0]
+    if len(bad) == 0:
+        return
+    f = int(bad[0])
+    i, j, k = (int(x) for x in (F[f] if vert_ids is None else np.asarray(vert_ids)[F[f]]))
+    at = f"triangle {f} (vertices {i}, {j}, {k})" if vert_ids is None else f"the triangle on vertices {i}, {j}, {k}"
+    raise BolusError(
+        f"{what} has {len(bad)} zero-area triangle(s), e.g. {at}: "
+        "coincident or collinear vertices; merge them first (Mesh > Clean Up > Merge by Distance, "
+        "then Degenerate Dissolve)"
+    )
 
 
 def check_mesh(V, F, what: str = "the mesh", *, nondegenerate: bool = True, manifold: bool = False,
@@ -405,21 +441,8 @@ class MeshTopology:
         return float(self.edge_lengths.mean()) if len(self.edges) else 0.0
 
     def require_nondegenerate(self, what: str = "the mesh", vert_ids=None) -> None:
-        """Raise BolusError naming the first zero-area triangle (coincident or collinear
-        vertices), the same test as `degenerate_faces`; such a triangle has no angles and
-        no shape, so angle sums (eq. 4-1) and springs (eq. 3-22) are undefined on it.
-        vert_ids (n,) int, optional: the user's index of each vertex (the message names
-        those, e.g. Blender's vertex indices of a selected region)."""
-        bad = np.nonzero(self.degenerate_faces())[0]
-        if len(bad):
-            f = int(bad[0])
-            i, j, k = (int(x) for x in (self.F[f] if vert_ids is None else np.asarray(vert_ids)[self.F[f]]))
-            at = f"triangle {f} (vertices {i}, {j}, {k})" if vert_ids is None else f"the triangle on vertices {i}, {j}, {k}"
-            raise BolusError(
-                f"{what} has {len(bad)} zero-area triangle(s), e.g. {at}: "
-                "coincident or collinear vertices; merge them first (Mesh > Clean Up > Merge by Distance, "
-                "then Degenerate Dissolve)"
-            )
+        """Raise BolusError naming the first zero-area triangle (`refuse_zero_area`)."""
+        refuse_zero_area(self.F, self.degenerate_faces(), what, vert_ids)
 
     def surface_warnings(self, allow_nonmanifold: bool = False, what: str = "the region", vert_ids=None) -> list[str]:
         """Check a surface before analysis; return the warnings to show.
@@ -447,9 +470,6 @@ class MeshTopology:
             )
         return [f"{where}: their vertices are treated like boundary vertices (flattenability 0)"]
 
-    def degenerate_faces(self, rel_tol: float = 1e-10) -> np.ndarray:
+    def degenerate_faces(self, rel_tol: float = ZERO_AREA_REL) -> np.ndarray:
         """(m,) bool: triangles whose area is below rel_tol * (median edge length)^2."""
-        if self.m == 0:
-            return np.zeros(0, dtype=bool)
-        L = float(np.median(self.edge_lengths))
-        return self.areas <= rel_tol * L * L
+        return zero_area_mask(self.areas, self.edge_lengths, rel_tol)
