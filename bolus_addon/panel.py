@@ -48,6 +48,97 @@ def draw_pattern_table(layout, t: dict) -> None:
             col.label(text=f"{r.get('name', r['patch'])}: {r.get('short_advice') or 'see the warnings'}")
 
 
+def draw_saliency(box, s, obj):
+    box.label(text="1. Where it cannot lie flat", icon="SHADING_SOLID")
+    box.prop(s, "smoothing_mm", text="Smoothing (mm)")
+    box.prop(s, "color_by")
+    op = box.operator("bolus.saliency_preview", icon="COLOR")
+    op.smoothing_mm = s.smoothing_mm
+    op.color_by = s.color_by
+    if obj is not None and PROP_SUM_VARPI in obj:
+        box.label(text=f"Σϖ = {obj[PROP_SUM_VARPI]:.3f} rad   FLV = {obj[PROP_FLV]:.3g}")
+
+def draw_patches(box, s, obj):
+    box.label(text="2. Patches", icon="MOD_EXPLODE")
+    col = box.column(align=True)
+    col.prop(s, "patches")
+    col.prop(s, "eta")
+    col.prop(s, "seed")
+    box.prop(s, "method")
+    op = box.operator("bolus.segment", icon="MESH_ICOSPHERE")
+    op.patches, op.eta, op.seed, op.smoothing_mm, op.method = s.patches, s.eta, s.seed, s.smoothing_mm, s.method
+    table = json_prop(obj, PROP_PATCH_TABLE)
+    table = table.get("patches") if isinstance(table, dict) else None
+    if table:
+        draw_table(box, ("Patch", "Verts", "Tris", "Σϖ", "FLV"), (
+            (str(r["patch"]), str(r["vertices"]), str(r["faces"]), f"{r['sum_varpi']:.2f}", f"{r['flv']:.3g}")
+            for r in table))
+    box.operator("bolus.smooth_cuts", icon="IPO_EASE_IN_OUT")
+    cuts = json_prop(obj, PROP_CUT_TABLE)
+    if cuts:
+        draw_table(box, ("Border", "Cut", "Turn/mm", "Moved"), (
+            (f"{r['a']}|{r['b']}", r["method"], f"{r['turning_before']:.2f}→{r['turning_after']:.2f}",
+             f"{r['max_shift_mm']:.1f} mm") for r in cuts))
+
+def draw_pattern(box, s, obj):
+    box.label(text="3. Flat pattern", icon="UV")
+    box.prop(s, "unfold_method")
+    row = box.row(align=True)
+    row.prop(s, "refine")
+    row.prop(s, "gap_mm", text="Gap (mm)")
+    op = box.operator("bolus.unfold", icon="MOD_UVPROJECT")
+    op.method, op.refine, op.gap_mm = s.unfold_method, s.refine, s.gap_mm
+    pat = None
+    if obj is not None:
+        pat = obj if PROP_PATTERN_TABLE in obj else bpy.data.objects.get(obj.name + PATTERN_SUFFIX)
+    t = json_prop(pat, PROP_PATTERN_TABLE)
+    if t:
+        box.label(text=f"{pat.name}: EL {t['EL'] * 100:.2f} %  EA {t['EA'] * 100:.2f} %")
+        draw_pattern_table(box, t)
+    box.prop(s, "warn_distortion_pct")
+    box.prop(s, "seam_allowance_mm", text="Seam allowance (mm)")
+    op = box.operator("bolus.export_pattern", icon="EXPORT")
+    op.seam_allowance_mm = s.seam_allowance_mm
+
+def draw_print(box, s, obj):
+    box.label(text="4. 3D print", icon="MOD_BUILD")
+    row = box.row(align=True)
+    row.prop(s, "parts")
+    row.prop(s, "print_method", text="")
+    op = box.operator("bolus.print_segment", icon="MOD_EXPLODE")
+    op.parts, op.method, op.seed = s.parts, s.print_method, s.seed
+    src = obj
+    if obj is not None and PROP_PART_SOURCE in obj:
+        src = bpy.data.objects.get(obj[PROP_PART_SOURCE], obj)
+    t = json_prop(src, PROP_PRINT_TABLE)
+    if t and "parts" in t:
+        box.label(text=f"{len(t['parts'])} parts, largest/smallest area {t['area_balance']:.2f}")
+    row = box.row(align=True)
+    row.prop(s, "layer_mm", text="Layer (mm)")
+    row.prop(s, "skin_side_up")
+    op = box.operator("bolus.orient_parts", icon="ORIENTATION_GIMBAL")
+    op.layer_mm, op.skin_side_up = s.layer_mm, s.skin_side_up
+    t = json_prop(src, PROP_ORIENT_TABLE)
+    if t:
+        draw_table(box, ("Part", "Tris", "WQ mm³", "WU mm³", "Support"), (
+            (r["part"], str(r["faces"]), f"{r['WQ']:.0f}", f"{r['WU']:.0f}", f"{r['support_volume_mm3']:.0f}")
+            for r in t["rows"]))
+        if t.get("support_ratio") is not None:
+            box.label(text=f"Parts' support: {t['support_ratio'] * 100:.0f} % of the whole model's")
+    box.operator("bolus.export_parts", icon="EXPORT")
+
+
+def json_prop(ob, key: str):
+    """The JSON table an operator left in custom property ``key`` of ``ob``, or None
+    (no object, no property, or not readable: the panel then shows no table)."""
+    if ob is None or key not in ob:
+        return None
+    try:
+        return json.loads(ob[key])
+    except (ValueError, TypeError):
+        return None
+
+
 class VIEW3D_PT_bolus(bpy.types.Panel):
     bl_label = "Bolus"
     bl_idname = "VIEW3D_PT_bolus"
@@ -60,103 +151,10 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
         s = context.scene.bolus
         obj = context.active_object
         layout.label(text=f"1 unit = {mesh_io.mm_per_unit(context.scene):g} mm", icon="DRIVER_DISTANCE")
-
-        box = layout.box()
-        box.label(text="1. Where it cannot lie flat", icon="SHADING_SOLID")
-        box.prop(s, "smoothing_mm", text="Smoothing (mm)")
-        box.prop(s, "color_by")
-        op = box.operator("bolus.saliency_preview", icon="COLOR")
-        op.smoothing_mm = s.smoothing_mm
-        op.color_by = s.color_by
-        if obj is not None and PROP_SUM_VARPI in obj:
-            box.label(text=f"Σϖ = {obj[PROP_SUM_VARPI]:.3f} rad   FLV = {obj[PROP_FLV]:.3g}")
-
-        box = layout.box()
-        box.label(text="2. Patches", icon="MOD_EXPLODE")
-        col = box.column(align=True)
-        col.prop(s, "patches")
-        col.prop(s, "eta")
-        col.prop(s, "seed")
-        box.prop(s, "method")
-        op = box.operator("bolus.segment", icon="MESH_ICOSPHERE")
-        op.patches, op.eta, op.seed, op.smoothing_mm, op.method = s.patches, s.eta, s.seed, s.smoothing_mm, s.method
-        if obj is not None and PROP_PATCH_TABLE in obj:
-            try:
-                table = json.loads(obj[PROP_PATCH_TABLE])["patches"]
-            except (ValueError, KeyError, TypeError):
-                table = []
-            if table:
-                draw_table(box, ("Patch", "Verts", "Tris", "Σϖ", "FLV"), (
-                    (str(r["patch"]), str(r["vertices"]), str(r["faces"]), f"{r['sum_varpi']:.2f}", f"{r['flv']:.3g}")
-                    for r in table))
-        box.operator("bolus.smooth_cuts", icon="IPO_EASE_IN_OUT")
-        if obj is not None and PROP_CUT_TABLE in obj:
-            try:
-                cuts = json.loads(obj[PROP_CUT_TABLE])
-            except (ValueError, TypeError):
-                cuts = []
-            if cuts:
-                draw_table(box, ("Border", "Cut", "Turn/mm", "Moved"), (
-                    (f"{r['a']}|{r['b']}", r["method"], f"{r['turning_before']:.2f}→{r['turning_after']:.2f}",
-                     f"{r['max_shift_mm']:.1f} mm") for r in cuts))
-
-        box = layout.box()
-        box.label(text="3. Flat pattern", icon="UV")
-        box.prop(s, "unfold_method")
-        row = box.row(align=True)
-        row.prop(s, "refine")
-        row.prop(s, "gap_mm", text="Gap (mm)")
-        op = box.operator("bolus.unfold", icon="MOD_UVPROJECT")
-        op.method, op.refine, op.gap_mm = s.unfold_method, s.refine, s.gap_mm
-        pat = None
-        if obj is not None:
-            pat = obj if PROP_PATTERN_TABLE in obj else bpy.data.objects.get(obj.name + PATTERN_SUFFIX)
-        if pat is not None and PROP_PATTERN_TABLE in pat:
-            try:
-                t = json.loads(pat[PROP_PATTERN_TABLE])
-            except (ValueError, TypeError):
-                t = None
-            if t:
-                box.label(text=f"{pat.name}: EL {t['EL'] * 100:.2f} %  EA {t['EA'] * 100:.2f} %")
-                draw_pattern_table(box, t)
-        box.prop(s, "warn_distortion_pct")
-        box.prop(s, "seam_allowance_mm", text="Seam allowance (mm)")
-        op = box.operator("bolus.export_pattern", icon="EXPORT")
-        op.seam_allowance_mm = s.seam_allowance_mm
-
-        box = layout.box()
-        box.label(text="4. 3D print", icon="MOD_BUILD")
-        row = box.row(align=True)
-        row.prop(s, "parts")
-        row.prop(s, "print_method", text="")
-        op = box.operator("bolus.print_segment", icon="MOD_EXPLODE")
-        op.parts, op.method, op.seed = s.parts, s.print_method, s.seed
-        src = obj
-        if obj is not None and PROP_PART_SOURCE in obj:
-            src = bpy.data.objects.get(obj[PROP_PART_SOURCE], obj)
-        if src is not None and PROP_PRINT_TABLE in src:
-            try:
-                t = json.loads(src[PROP_PRINT_TABLE])
-                box.label(text=f"{len(t['parts'])} parts, largest/smallest area {t['area_balance']:.2f}")
-            except (ValueError, TypeError, KeyError):
-                pass
-        row = box.row(align=True)
-        row.prop(s, "layer_mm", text="Layer (mm)")
-        row.prop(s, "skin_side_up")
-        op = box.operator("bolus.orient_parts", icon="ORIENTATION_GIMBAL")
-        op.layer_mm, op.skin_side_up = s.layer_mm, s.skin_side_up
-        if src is not None and PROP_ORIENT_TABLE in src:
-            try:
-                t = json.loads(src[PROP_ORIENT_TABLE])
-            except (ValueError, TypeError):
-                t = None
-            if t:
-                draw_table(box, ("Part", "Tris", "WQ mm³", "WU mm³", "Support"), (
-                    (r["part"], str(r["faces"]), f"{r['WQ']:.0f}", f"{r['WU']:.0f}", f"{r['support_volume_mm3']:.0f}")
-                    for r in t["rows"]))
-                if t.get("support_ratio") is not None:
-                    box.label(text=f"Parts' support: {t['support_ratio'] * 100:.0f} % of the whole model's")
-        box.operator("bolus.export_parts", icon="EXPORT")
+        draw_saliency(layout.box(), s, obj)
+        draw_patches(layout.box(), s, obj)
+        draw_pattern(layout.box(), s, obj)
+        draw_print(layout.box(), s, obj)
 
 
 classes = (VIEW3D_PT_bolus,)
