@@ -76,7 +76,7 @@ def test_operators_named_are_the_registered_ones(text):
 
 
 #: Blender's own menus and fields the steps name (not ours to check)
-BLENDER_UI = {"File ‣ Import ‣ STL", "Scale", "Scene Properties ‣ Units ‣ Unit Scale"}
+BLENDER_UI = {"File ‣ Import ‣ STL", "Scale", "Scene Unit", "Scene Properties ‣ Units ‣ Unit Scale"}
 
 
 def test_sidebar_names_are_the_panels(text):
@@ -194,3 +194,18 @@ def test_scripting_recipe_runs_as_written(text, tmp_path):
     svg = (tmp_path / "pattern.svg").read_text()
     w = float(re.search(r'width="([\d.]+)mm"', svg).group(1))
     assert 70.0 < w < 400.0  # a 70 x 50 mm surface (plus the dome), laid out at true size in mm
+
+
+@pytest.mark.blender
+def test_stl_import_units_as_the_readme_says(bpy_addon, scene, tmp_path):
+    """Step 0: in a scene of Unit Scale 0.001 an STL in mm comes in at true size, and the
+    importer's 'Scene Unit' option would make it 1000x too large."""
+    bpy = bpy_addon
+    _write_stl_mm(tmp_path / "skin.stl")
+    scene.unit_settings.scale_length = 0.001
+    for use_scene_unit, width in ((False, 70.0), (True, 70_000.0)):
+        bpy.ops.wm.stl_import(filepath=str(tmp_path / "skin.stl"), use_scene_unit=use_scene_unit)
+        ob = bpy.context.selected_objects[0]
+        co = np.array([ob.matrix_world @ v.co for v in ob.data.vertices])
+        assert np.ptp(co[:, 0]) == pytest.approx(width, rel=1e-4)
+        bpy.data.objects.remove(ob)
