@@ -6,7 +6,7 @@
   ``<name>_part_<i>``, holding the part's polygons in the source's world coordinates,
   and gives that object the rotation that takes the part's best build direction to +Z
   and the lift that rests it on z = 0 (so the transform shows how it was turned; the
-  parts are laid side by side along X).  The print figures (WQ, WU, support volume,
+  parts are laid out side by side by `core.layout.plate_layout`, bounding boxes 10 mm apart).  The print figures (WQ, WU, support volume,
   all in mm^3) are custom properties of each part and, with the whole model in its own
   best orientation as the first row (the seed's Tables 6-1, 6-2), a table on the
   source.
@@ -33,10 +33,13 @@ from . import mesh_io
 from .compat import stl_export as _stl_export  # version differences live in compat
 from .core.colormap import categorical_linear_rgba
 from .core.errors import BolusError
-from .core.print_orientation import CRITICAL_ANGLE_DEG, orient, overhang_faces
+from .core.layout import centre_on_plate, plate_layout
+from .core.pattern_mesh import pattern_polygons
+from .core.print_orientation import CRITICAL_ANGLE_DEG, PrintPlan, orient_print_parts, overhang_faces
 from .core.print_segmentation import area_balance, part_stats, print_segmentation
 from .core.topology import MeshTopology
-from .operators import BolusOperator, check_topology
+from .operators import BolusOperator
+from .pattern_ops import _new_mesh, _polygon_corners  # Blender-side mesh building, shared
 from .properties import layer_property, parts_property, print_method_property, seed_property, skin_side_up_property
 
 #: names fixed by SPEC.md
@@ -53,7 +56,7 @@ PROP_PRINT_TABLE = "bolus_print_table"
 PROP_ORIENT_TABLE = "bolus_orient_table"
 PROP_PART_SOURCE = "bolus_source"
 PROP_PART_INDEX = "bolus_part"
-PART_GAP_MM = 10.0
+PART_GAP_MM = 10.0  #: between the parts' bounding boxes on the plate: room to pick each one
 OVERHANG_RGBA = (0.8, 0.05, 0.02, 1.0)
 PLAIN_RGBA = (0.6, 0.6, 0.6, 1.0)
 
@@ -98,17 +101,12 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
             raise BolusError(f"the region has {nfaces} faces, fewer than the {self.parts} parts asked")
         seg = print_segmentation(
             region.V, region.F, self.parts, method=self.method.lower(), rng=self.seed, topo=topo,
-            progress=lambda f, t: self.progress(0.9 * f, t),
+            face_groups=region.tri_poly, progress=lambda f, t: self.progress(0.9 * f, t),
         )
-        # the triangles of one polygon stay together: majority (by area) of its triangles
         obj, me = region.obj, region.mesh
-        npoly = len(me.polygons)
-        p = seg.part_count
-        votes = np.zeros((npoly, p))
-        np.add.at(votes, (region.tri_poly, seg.labels), topo.areas)
-        poly_labels = np.full(npoly, -1, dtype=np.int64)
-        poly_labels[region.poly_ids] = np.argmax(votes[region.poly_ids], axis=1)
-        tri_labels = poly_labels[region.tri_poly]
+        p, tri_labels = seg.part_count, seg.labels  # the triangles of one polygon share a part
+        poly_labels = np.full(len(me.polygons), -1, dtype=np.int64)
+        poly_labels[region.tri_poly] = tri_labels
         stats = [r.as_dict() for r in part_stats(region.V, region.F, tri_labels, topo)]
         with mesh_io.object_mode(obj):
             mesh_io.write_attribute(me, ATTR_PRINT_PART, "INT", "FACE", poly_labels)
@@ -127,11 +125,6 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
         for r in stats:
             self.report({"INFO"}, f"Part {r['part']}: {r['faces']} triangles, {r['area_mm2'] / 100:.1f} cm²")
         return {"FINISHED"}
-
-
-def _row(name: str, faces: int, area: float, o) -> dict:
-    return {"part": name, "faces": faces, "area_mm2": area, "direction": [float(x) for x in o.direction],
-            "WQ": o.WQ, "WU": o.WU, "support_volume_mm3": o.support_volume, "objective": o.objective}
 
 
 def format_print_row(r: dict) -> str:
@@ -162,107 +155,54 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
             warnings.append(f"no '{ATTR_PRINT_PART}' attribute (run Split into Print Parts first): "
                             "the region is oriented as one part")
         tri_labels = poly_labels[region.tri_poly]
-        inside = tri_labels >= 0
-        if not inside.any():
+        if not (tri_labels >= 0).any():
             raise BolusError("none of the region's faces belongs to a print part: run Split into Print Parts first")
-        parts = np.unique(tri_labels[inside])
-        favour = None
-        if self.skin_side_up:
-            # the skin-contact side is the side the normals point away from: keep it facing up
-            n = (topo.face_normals * topo.areas[:, None]).sum(axis=0)
-            if np.linalg.norm(n) < 1e-9 * topo.areas.sum():
-                raise BolusError("the surface has no prevailing side (its normals cancel out); "
-                                 "untick 'Skin side up'")
-            favour = -n / np.linalg.norm(n)
-        kw = dict(h=self.layer_mm, favour=favour)
-        note = _open_note(topo)
-        self.progress(0.02, "whole model")
-        whole = orient(region.V, region.F, topo=topo, **kw)
-        rows = [_row("whole", int(topo.m), float(topo.areas.sum()), whole)]
-        results = []
-        for k, p in enumerate(parts):
-            self.progress(0.1 + 0.8 * k / len(parts), f"part {p}")
-            sel = tri_labels == p
-            Fs = region.F[sel]
-            ids, inv = np.unique(Fs.ravel(), return_inverse=True)
-            Fl = inv.reshape(-1, 3)
-            sub = MeshTopology(region.V[ids], Fl)
-            if sub.areas.sum() <= 0 or len(Fl) < 1:
-                raise BolusError(f"print part {p} has no area: re-run Split into Print Parts")
-            if len(Fl) < 4:
-                warnings.append(f"print part {p} has only {len(Fl)} triangles: its orientation is of little use")
-            o = orient(region.V[ids], Fl, topo=sub, **kw)
-            results.append((int(p), o))
-            rows.append(_row(f"part {p}", int(sel.sum()), float(sub.areas.sum()), o))
+        plan = orient_print_parts(region.V, region.F, tri_labels, h=self.layer_mm, skin_side_up=self.skin_side_up,
+                                  topo=topo, progress=lambda f, t: self.progress(0.9 * f, t))
         self.progress(0.9, "part objects")
-        self._make_part_objects(context, region, poly_labels, results)
-        total_support = sum(r["support_volume_mm3"] for r in rows[1:])
-        table = {"layer_mm": self.layer_mm, "critical_angle_deg": CRITICAL_ANGLE_DEG, "skin_side_up": self.skin_side_up,
-                 "rows": rows, "parts_support_mm3": total_support,
-                 "support_ratio": total_support / whole.support_volume if whole.support_volume > 0 else None}
-        obj[PROP_ORIENT_TABLE] = json.dumps(table)
-        self.warn_all(warnings)
-        self.report({"INFO"}, f"Oriented {len(results)} print parts of '{obj.name}' (layer {self.layer_mm:g} mm)"
+        self._make_part_objects(context, region, tri_labels, plan)
+        rows, ratio = plan.rows(), plan.support_ratio
+        obj[PROP_ORIENT_TABLE] = json.dumps({
+            "layer_mm": self.layer_mm, "critical_angle_deg": CRITICAL_ANGLE_DEG, "skin_side_up": self.skin_side_up,
+            "rows": rows, "parts_support_mm3": plan.parts_support_mm3, "support_ratio": ratio})
+        note = _open_note(topo)
+        self.warn_all(warnings + plan.warnings)
+        self.report({"INFO"}, f"Oriented {len(plan.parts)} print parts of '{obj.name}' (layer {self.layer_mm:g} mm)"
                     + (f"; {note}" if note else ""))
         for r in rows:
             self.report({"INFO"}, format_print_row(r))
-        ratio = table["support_ratio"]
-        self.report({"INFO"}, f"Support of the parts together: {total_support:.1f} mm³"
-                    + (f" = {ratio * 100:.0f} % of the whole model's {whole.support_volume:.1f} mm³" if ratio is not None else ""))
+        whole_sv = plan.whole.orientation.support_volume
+        self.report({"INFO"}, f"Support of the parts together: {plan.parts_support_mm3:.1f} mm³"
+                    + (f" = {ratio * 100:.0f} % of the whole model's {whole_sv:.1f} mm³" if ratio is not None else ""))
         return {"FINISHED"}
 
-    def _make_part_objects(self, context, region, poly_labels, results) -> None:
-        obj, me = region.obj, region.mesh
-        scale = region.mm_per_unit
-        M = np.array(obj.matrix_world, dtype=np.float64)
-        co = np.empty(len(me.vertices) * 3)
-        me.vertices.foreach_get("co", co)
-        world = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]  # scene units
-        loop_v = np.empty(len(me.loops), dtype=np.int64)
-        me.loops.foreach_get("vertex_index", loop_v)
-        starts = np.empty(len(me.polygons), dtype=np.int64)
-        totals = np.empty(len(me.polygons), dtype=np.int64)
-        me.polygons.foreach_get("loop_start", starts)
-        me.polygons.foreach_get("loop_total", totals)
+    def _make_part_objects(self, context, region, tri_labels, plan: PrintPlan) -> None:
+        """One object per part: its polygons in world units, turned and laid out by `plate_layout`."""
+        obj, scale = region.obj, region.mm_per_unit
+        loop_start, loop_total, loop_vert = _polygon_corners(region.mesh)
+        polys = [pattern_polygons(region.tri_poly, np.where(tri_labels == r.part, 0, -1), region.F, region.F,
+                                  region.vert_ids, loop_start, loop_total, loop_vert) for r in plan.parts]
+        used = [np.unique(pp.corner_src, return_inverse=True) for pp in polys]
+        place = plate_layout([region.V[u] for u, _ in used], [r.orientation.rotation for r in plan.parts],
+                             PART_GAP_MM)
         _remove_parts(obj.name)
         collection = obj.users_collection[0] if obj.users_collection else context.scene.collection
-        x_cursor = 0.0
-        region_polys = np.zeros(len(me.polygons), dtype=bool)
-        region_polys[region.poly_ids] = True
-        for p, o in results:
-            polys = np.nonzero((poly_labels == p) & region_polys)[0]
-            loops = [loop_v[starts[i]:starts[i] + totals[i]] for i in polys]
-            used, inv = np.unique(np.concatenate(loops), return_inverse=True)
-            faces, k = [], 0
-            for lp in loops:
-                faces.append(inv[k:k + len(lp)].tolist())
-                k += len(lp)
-            pme = bpy.data.meshes.new(f"{obj.name}{PART_INFIX}{p}")
-            pme.from_pydata(world[used].tolist(), [], faces)
-            pme.update()
-            pob = bpy.data.objects.new(f"{obj.name}{PART_INFIX}{p}", pme)
+        for r, pp, (u, corners), (R, t) in zip(plan.parts, polys, used, place):
+            name = f"{obj.name}{PART_INFIX}{r.part}"
+            pme = _new_mesh(name, region.V[u] / scale, corners.reshape(-1), pp.loop_starts)
+            pob = bpy.data.objects.new(name, pme)
             collection.objects.link(pob)
-            R = o.rotation
-            W = world[used] @ R.T
-            lo, hi = W.min(axis=0), W.max(axis=0)
-            t = np.array([x_cursor - lo[0], -(lo[1] + hi[1]) / 2.0, -lo[2]])
-            x_cursor += (hi[0] - lo[0]) + PART_GAP_MM / scale
             T = np.eye(4)
-            T[:3, :3] = R
-            T[:3, 3] = t
+            T[:3, :3], T[:3, 3] = R, t / scale
             pob.matrix_world = Matrix(T.tolist())
-            # overhang faces (in the print orientation) in red
-            pn = np.empty(len(pme.polygons) * 3)
+            pn = np.empty(len(pme.polygons) * 3)  # overhang faces (in the print orientation) in red
             pme.polygons.foreach_get("normal", pn)
-            over = overhang_faces(pn.reshape(-1, 3), o.direction)
-            rgba = np.where(over[:, None], np.array(OVERHANG_RGBA), np.array(PLAIN_RGBA))
-            mesh_io.write_face_colors(pme, ATTR_OVERHANG_COLOR, rgba)
+            over = overhang_faces(pn.reshape(-1, 3), r.orientation.direction)
+            mesh_io.write_face_colors(pme, ATTR_OVERHANG_COLOR, np.where(over[:, None], OVERHANG_RGBA, PLAIN_RGBA))
+            o = r.orientation
             pob[PROP_DIRECTION] = [float(x) for x in o.direction]
-            pob[PROP_WQ] = o.WQ
-            pob[PROP_WU] = o.WU
-            pob[PROP_SUPPORT] = o.support_volume
-            pob[PROP_PART_SOURCE] = obj.name
-            pob[PROP_PART_INDEX] = p
+            pob[PROP_WQ], pob[PROP_WU], pob[PROP_SUPPORT] = o.WQ, o.WU, o.support_volume
+            pob[PROP_PART_SOURCE], pob[PROP_PART_INDEX] = obj.name, r.part
 
 
 @contextmanager
@@ -278,12 +218,9 @@ def _at_origin(context, part: bpy.types.Object):
         me.vertices.foreach_get("co", co)
     finally:
         ev.to_mesh_clear()
-    M = np.array(part.matrix_world, dtype=np.float64)
-    W = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
     location = part.location.copy()  # only the location moves: restored bit for bit
-    if len(W):
-        lo, hi = W.min(axis=0), W.max(axis=0)
-        shift = np.array([-(lo[0] + hi[0]) / 2.0, -(lo[1] + hi[1]) / 2.0, -lo[2]])
+    if len(co):
+        shift = centre_on_plate(mesh_io.world_mm(co.reshape(-1, 3), part, 1.0))  # world units (1 unit per unit)
         if part.parent is not None:  # the location lives in the parent's frame
             P = np.array(part.parent.matrix_world, dtype=np.float64) @ np.array(part.matrix_parent_inverse)
             shift = np.linalg.solve(P[:3, :3], shift)

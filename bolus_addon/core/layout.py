@@ -7,6 +7,10 @@ edge directions are tried).  `pack_islands` orients every island and places the
 bounding boxes on shelves ("first fit, decreasing height"): islands sorted by height,
 each put into the first row with room left, rows stacked upwards from the origin.
 Only rotations and translations are applied, so every distance is kept.
+
+`plate_layout` lays 3D print parts on the build plate the same way: each part turned
+to its build direction, its footprint (x, y) packed by `pack_transforms` (so the part
+also turns about +Z, which keeps its build direction), lifted to rest on z = 0.
 """
 from __future__ import annotations
 
@@ -15,7 +19,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from .errors import BolusError
 
-__all__ = ["orient_island", "pack_islands", "pack_transforms", "rotate"]
+__all__ = ["orient_island", "pack_islands", "pack_transforms", "plate_layout", "centre_on_plate", "rotate"]
 
 
 def _as_island(UV, what="an island") -> np.ndarray:
@@ -135,3 +139,45 @@ def pack_transforms(islands, gap_mm: float = 10.0,
     """
     oriented, lo, corner = _plan(islands, gap_mm, max_row_width_mm)
     return [(o[1], corner[i] - lo[i]) for i, o in enumerate(oriented)]
+
+
+def plate_layout(parts, rotations, gap_mm: float = 10.0) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Lay print parts side by side on the plate: per part ``(R (3,3), t (3,))``.
+
+    parts [(n_i,3)] vertices in mm; rotations [(3,3)] each taking the part's build
+    direction to +Z.  The placed part is ``V_i @ R.T + t``: R is the given rotation
+    followed by a turn about +Z (the packing of the footprints, `pack_transforms`, with
+    bounding boxes ``gap_mm`` apart), and t rests the part on z = 0.
+    """
+    parts = [np.asarray(V, dtype=np.float64) for V in parts]
+    rotations = [np.asarray(R, dtype=np.float64) for R in rotations]
+    if len(parts) != len(rotations):
+        raise BolusError(f"{len(parts)} parts but {len(rotations)} rotations")
+    for i, (V, R) in enumerate(zip(parts, rotations)):
+        if V.ndim != 2 or V.shape[1] != 3:
+            raise BolusError(f"part {i} must be an (n, 3) array of positions, got shape {V.shape}")
+        _as_island(V[:, :2], f"part {i}")  # non-empty and finite
+        if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-9) or np.linalg.det(R) <= 0:
+            raise BolusError(f"the rotation of part {i} is not a proper 3x3 rotation")
+    turned = [V @ R.T for V, R in zip(parts, rotations)]
+    out = []
+    for W, R, (angle, t2) in zip(turned, rotations, pack_transforms([W[:, :2] for W in turned], gap_mm)):
+        c, s = np.cos(angle), np.sin(angle)
+        Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # rotate(UV, angle) as a 3D turn about +Z
+        out.append((Rz @ R, np.array([t2[0], t2[1], -W[:, 2].min()])))
+    return out
+
+
+def centre_on_plate(W) -> np.ndarray:
+    """The shift (3,) that puts the points W (n,3) at the origin of the plate: the centre of
+    their (x, y) bounding box on the origin and their lowest point on z = 0 (as a slicer
+    expects an STL); zeros for no points."""
+    W = np.asarray(W, dtype=np.float64)
+    if W.ndim != 2 or W.shape[1] != 3:
+        raise BolusError(f"points must be an (n, 3) array, got shape {W.shape}")
+    if len(W) == 0:
+        return np.zeros(3)
+    if not np.isfinite(W).all():
+        raise BolusError("the part has non-finite (NaN or infinite) coordinates")
+    lo, hi = W.min(axis=0), W.max(axis=0)
+    return np.array([-(lo[0] + hi[0]) / 2.0, -(lo[1] + hi[1]) / 2.0, -lo[2]])
