@@ -1,21 +1,11 @@
 """Operators for 3D printing: `print_segment`, `orient_parts`, `export_parts` (SPEC; seed ch. 6).
 
-* `print_segment` writes the face attribute ``bolus_print_part`` on the source (like
-  `segment` writes ``bolus_patch``): the area-balanced spectral cut of 6.2.
-* `orient_parts` never touches the source: it creates one object per part,
-  ``<name>_part_<i>``, holding the part's polygons in the source's world coordinates,
-  and gives that object the rotation that takes the part's best build direction to +Z
-  and the lift that rests it on z = 0 (so the transform shows how it was turned; the
-  parts are laid out side by side by `core.layout.plate_layout`, bounding boxes 10 mm apart).  The print figures (WQ, WU, support volume,
-  all in mm^3) are custom properties of each part and, with the whole model in its own
-  best orientation as the first row (the seed's Tables 6-1, 6-2), a table on the
-  source.
-* `export_parts` writes one binary STL per part in millimetres with Blender's own STL
-  exporter, each part at the origin (its XY bounding box centred there, its lowest
-  point on z = 0), as a slicer expects; the part objects keep their layout.
-
-Bolus shells are often open surfaces: each face counts once with its normal as given
-(core.print_orientation); the report says so when the part is open.
+They read the region, call the core and write back: `print_segment` the face attribute
+``bolus_print_part`` (core.print_segmentation, 6.2); `orient_parts` one object per part,
+``<name>_part_<i>``, its polygons in world coordinates, the rotation to its build
+direction and the plate layout in its transform (core.print_orientation.orient_print_parts,
+core.layout.plate_layout), the figures as custom properties and a table on the source;
+`export_parts` one binary STL per part in mm, each at the origin on z = 0.
 """
 from __future__ import annotations
 
@@ -34,10 +24,10 @@ from .compat import stl_export as _stl_export  # version differences live in com
 from .core.colormap import categorical_linear_rgba
 from .core.errors import BolusError
 from .core.layout import centre_on_plate, plate_layout
+from .core.print_measures import open_surface_note
 from .core.pattern_mesh import pattern_polygons
 from .core.print_orientation import CRITICAL_ANGLE_DEG, PrintPlan, orient_print_parts, overhang_faces
-from .core.print_segmentation import area_balance, part_stats, print_segmentation
-from .core.topology import MeshTopology
+from .core.print_segmentation import print_segmentation
 from .operators import BolusOperator
 from .pattern_ops import _new_mesh, _polygon_corners  # Blender-side mesh building, shared
 from .properties import layer_property, parts_property, print_method_property, seed_property, skin_side_up_property
@@ -76,14 +66,6 @@ def _remove_parts(source_name: str) -> None:
             bpy.data.meshes.remove(me)
 
 
-def _open_note(topo: MeshTopology) -> str | None:
-    nb = int(topo.boundary_edges.sum())
-    if nb:
-        return (f"open surface ({nb} boundary edges): every face is counted once with its normal as given; "
-                "support is measured under the faces that look down")
-    return None
-
-
 class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
     """Split the bolus into parts of balanced area for 3D printing (area-balanced spectral cut, seed 6.2)"""
 
@@ -96,33 +78,25 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
 
     def run(self, context):
         region, topo, warnings = self.read_region(context, allow_nonmanifold=True)
-        nfaces = len(np.unique(region.tri_poly))
-        if nfaces < self.parts:
-            raise BolusError(f"the region has {nfaces} faces, fewer than the {self.parts} parts asked")
         seg = print_segmentation(
             region.V, region.F, self.parts, method=self.method.lower(), rng=self.seed, topo=topo,
             face_groups=region.tri_poly, progress=lambda f, t: self.progress(0.9 * f, t),
         )
         obj, me = region.obj, region.mesh
-        p, tri_labels = seg.part_count, seg.labels  # the triangles of one polygon share a part
         poly_labels = np.full(len(me.polygons), -1, dtype=np.int64)
-        poly_labels[region.tri_poly] = tri_labels
-        stats = [r.as_dict() for r in part_stats(region.V, region.F, tri_labels, topo)]
+        poly_labels[region.tri_poly] = seg.labels  # the triangles of one polygon share a part
         with mesh_io.object_mode(obj):
             mesh_io.write_attribute(me, ATTR_PRINT_PART, "INT", "FACE", poly_labels)
             mesh_io.write_face_colors(me, ATTR_PRINT_PART_COLOR, categorical_linear_rgba(poly_labels))
             me.update()
-        balance = area_balance(tri_labels, topo.areas)
-        obj[PROP_PRINT_TABLE] = json.dumps({"method": self.method, "requested": self.parts, "parts": stats,
-                                            "area_balance": balance})
-        if p != self.parts:
-            warnings.append(f"{p} parts instead of the {self.parts} asked: clusters that fell apart became "
-                            "separate parts, pieces under 5 % of the area were merged")
-        note = _open_note(topo)
-        self.warn_all(warnings)
-        self.report({"INFO"}, f"Split '{obj.name}' into {p} print parts ({self.method}; largest/smallest area "
-                              f"{balance:.2f}); attribute '{ATTR_PRINT_PART}'" + (f"; {note}" if note else ""))
-        for r in stats:
+        table = seg.table(region.V, region.F, topo)
+        obj[PROP_PRINT_TABLE] = json.dumps({**table, "method": self.method})
+        note = open_surface_note(topo)
+        self.warn_all(warnings + [m for m in [seg.count_note()] if m])
+        self.report({"INFO"}, f"Split '{obj.name}' into {seg.part_count} print parts ({self.method}; largest/smallest "
+                              f"area {table['area_balance']:.2f}); attribute '{ATTR_PRINT_PART}'"
+                              + (f"; {note}" if note else ""))
+        for r in table["parts"]:
             self.report({"INFO"}, f"Part {r['part']}: {r['faces']} triangles, {r['area_mm2'] / 100:.1f} cm²")
         return {"FINISHED"}
 
@@ -165,7 +139,7 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
         obj[PROP_ORIENT_TABLE] = json.dumps({
             "layer_mm": self.layer_mm, "critical_angle_deg": CRITICAL_ANGLE_DEG, "skin_side_up": self.skin_side_up,
             "rows": rows, "parts_support_mm3": plan.parts_support_mm3, "support_ratio": ratio})
-        note = _open_note(topo)
+        note = open_surface_note(topo)
         self.warn_all(warnings + plan.warnings)
         self.report({"INFO"}, f"Oriented {len(plan.parts)} print parts of '{obj.name}' (layer {self.layer_mm:g} mm)"
                     + (f"; {note}" if note else ""))
@@ -207,10 +181,8 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
 
 @contextmanager
 def _at_origin(context, part: bpy.types.Object):
-    """Move `part` for the time of an export so that the centre of its XY bounding box is at
-    the origin and its lowest point on z = 0 (world space, modifiers applied); its own
-    transform comes back afterwards.  The layout of orient_parts puts the parts side by
-    side along X: a printer's slicer wants each STL at the origin on the plate."""
+    """Move `part` for the time of an export to the origin of the plate (`layout.centre_on_plate`,
+    world space, modifiers applied), as a slicer wants it; its transform comes back afterwards."""
     ev = part.evaluated_get(context.evaluated_depsgraph_get())
     me = ev.to_mesh()
     try:

@@ -443,7 +443,7 @@ def test_more_parts_than_faces(bpy_addon, scene):
     bpy = bpy_addon
     ob = make_object(bpy, [[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0]], [[0, 1, 2, 3]], scale_length=0.001)
     before = mesh_snapshot(ob.data)
-    with pytest.raises(RuntimeError, match="the region has 1 faces, fewer than the 3 parts asked"):
+    with pytest.raises(RuntimeError, match="the mesh has 1 faces, fewer than the 3 parts asked"):
         bpy.ops.bolus.print_segment(parts=3)
     assert_unchanged(before, mesh_snapshot(ob.data))
     assert "bolus_print_part" not in ob.data.attributes and "bolus_print_table" not in ob

@@ -48,6 +48,7 @@ __all__ = [
     "overhang_faces",
     "face_support",
     "print_objective",
+    "open_surface_note",
 ]
 
 LAYER_MM = 0.2  #: SPEC's layer height h
@@ -295,3 +296,12 @@ def print_objective(
     h, cos_c = check_print_settings(h, critical_angle_deg)
     WQ, WU, SV = PrintTerms.exact(topo).evaluate(B, h, cos_c, chunk)
     return PrintObjective(WQ, WU, SV)
+
+
+def open_surface_note(topo: MeshTopology) -> str | None:
+    """What the one-sided measures mean on an open surface (module doc), or None when it is closed."""
+    nb = int(topo.boundary_edges.sum())
+    if not nb:
+        return None
+    return (f"open surface ({nb} boundary edges): every face is counted once with its normal as given; "
+            "support is measured under the faces that look down")

@@ -144,10 +144,26 @@ class PrintSegmentation:
     embedding: np.ndarray  #: (m,k) U' (abcut) or U (ratiocut)
     method: str
     requested: int
+    min_part_fraction: float = 0.05  #: parts below this fraction of the area were merged
 
     @property
     def part_count(self) -> int:
         return int(self.labels.max()) + 1 if self.labels.size else 0
+
+    def count_note(self) -> str | None:
+        """Why the part count differs from the one asked, or None."""
+        p = self.part_count
+        if p == self.requested:
+            return None
+        return (f"{p} parts instead of the {self.requested} asked: clusters that fell apart became separate parts, "
+                f"pieces under {100 * self.min_part_fraction:g} % of the area were merged")
+
+    def table(self, V, F, topo: MeshTopology | None = None) -> dict:
+        """The parts' rows (`part_stats`) and their area balance, as JSON-ready data."""
+        topo = MeshTopology(V, F) if topo is None else topo
+        return {"method": self.method, "requested": self.requested,
+                "parts": [r.as_dict() for r in part_stats(V, F, self.labels, topo)],
+                "area_balance": area_balance(self.labels, topo.areas)}
 
 
 def print_segmentation(
@@ -188,8 +204,10 @@ def print_segmentation(
         raise BolusError("the mesh has no faces; select the faces to split")
     if face_groups is not None and np.shape(face_groups) != (topo.m,):
         raise BolusError(f"face groups must be one per triangle ({topo.m}), got shape {np.shape(face_groups)}")
-    if topo.m < k:
-        raise BolusError(f"the mesh has {topo.m} triangles, fewer than the {k} parts asked")
+    faces = topo.m if face_groups is None else len(np.unique(face_groups))
+    if faces < k:
+        raise BolusError(f"the mesh has {faces} {'faces' if face_groups is not None else 'triangles'}, "
+                         f"fewer than the {k} parts asked")
     total = float(topo.areas.sum())
     if not total > 0:
         raise BolusError("the mesh has zero area (all its faces are degenerate); check the mesh")
@@ -219,7 +237,7 @@ def print_segmentation(
     report(0.9, "parts")
     labels = connected_patches(topo, clusters, min_area=min_part_fraction * total)
     report(1.0, "done")
-    return PrintSegmentation(labels, clusters, vals, U, method, k)
+    return PrintSegmentation(labels, clusters, vals, U, method, k, min_part_fraction)
 
 
 def print_segment(V, F, parts: int = 3, method: str = "abcut", rng=0, topo: MeshTopology | None = None,
