@@ -21,6 +21,7 @@ import resource
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -273,6 +274,30 @@ def clean_scene(bpy) -> None:
         if mat.users == 0:
             bpy.data.materials.remove(mat)
     gc.collect()
+
+
+def timed_uv_operator(bpy, ob, op, what: str, **kw) -> tuple[float, int, list[str]]:
+    """Time one UV operator call on every face of ob (Edit Mode, face select, all revealed and selected).
+
+    Only the call op(**kw) is timed; Object Mode afterwards.  Returns (seconds, faces
+    selected during the call, the lines the operator printed); raises if it did not finish.
+    """
+    bpy.context.view_layer.objects.active = ob
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_mode(type="FACE")
+    bpy.ops.mesh.reveal()
+    bpy.ops.mesh.select_all(action="SELECT")
+    ob.update_from_editmode()
+    selected = int(ob.data.total_face_sel)
+    gc.collect()
+    with captured_output() as out:
+        t0 = time.perf_counter()
+        res = op(**kw)
+        dt = time.perf_counter() - t0
+    bpy.ops.object.mode_set(mode="OBJECT")
+    if res != {"FINISHED"}:
+        raise RuntimeError(f"{what} returned {res}:\n{out()}")
+    return dt, selected, [ln.strip() for ln in out().splitlines() if ln.strip()]
 
 
 def import_mesh(bpy, path, scale_length: float):

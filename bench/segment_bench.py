@@ -38,7 +38,7 @@ from pathlib import Path
 
 import benchutil
 from benchutil import SHARED_MESHES, Table, captured_output, clean_scene, current_rss_kb, import_mesh, maxrss_kb, \
-    reset_peak_rss
+    reset_peak_rss, timed_uv_operator
 
 PATCHES = 4
 ETA = 5.0
@@ -50,12 +50,17 @@ UV_SENTINEL = -7.25  # written into the UV layer before smart_project; none may 
 MESHES = [
     ("makehuman_face_patch.obj", 0.1, "dm: scale_length 0.1 (1 unit = 100 mm)"),
     ("ict_face_narrow.obj", 0.01, "cm: scale_length 0.01 (1 unit = 10 mm)"),
-    ("demosthenes.obj", 0.1, "normalised units, TAKEN AS 1 unit = 100 mm: scale_length 0.1 (assumption, not a real size)"),
+    ("demosthenes.obj", 0.1,
+     "normalised units, TAKEN AS 1 unit = 100 mm: scale_length 0.1 (assumption, not a real size)"),
     ("nefertiti.obj", 0.001, "mm: scale_length 0.001 (1 unit = 1 mm)"),
 ]
 QUICK = {"makehuman_face_patch.obj", "ict_face_narrow.obj"}
 
 MB = 1024.0 * 1024.0
+MEMORY_LABELS = {
+    "tracemalloc_peak_mb": "peak of Python objects and numpy buffers allocated during one segment call (tracemalloc)",
+    "rss_delta_mb": "process peak RSS (ru_maxrss, high-water mark reset before the call) minus RSS before the call",
+}
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -132,21 +137,7 @@ def timed_smart_project(bpy, ob, repeat: int) -> tuple[float, list[float], dict]
     for _ in range(repeat):
         bpy.ops.object.mode_set(mode="OBJECT")
         me.uv_layers.active.data.foreach_set("uv", np.full(len(me.loops) * 2, UV_SENTINEL, dtype=np.float32))
-        bpy.context.view_layer.objects.active = ob
-        bpy.ops.object.mode_set(mode="EDIT")
-        bpy.ops.mesh.select_mode(type="FACE")
-        bpy.ops.mesh.reveal()
-        bpy.ops.mesh.select_all(action="SELECT")
-        ob.update_from_editmode()
-        selected = me.total_face_sel
-        gc.collect()
-        with captured_output() as out:
-            t0 = time.perf_counter()
-            res = bpy.ops.uv.smart_project()
-            dt = time.perf_counter() - t0
-        bpy.ops.object.mode_set(mode="OBJECT")
-        if res != {"FINISHED"}:
-            raise RuntimeError(f"uv.smart_project returned {res}:\n{out()}")
+        dt, selected, _ = timed_uv_operator(bpy, ob, bpy.ops.uv.smart_project, "uv.smart_project")
         times.append(dt)
         uv = uv_array(me)
         left = int(np.count_nonzero(np.all(uv == np.float32(UV_SENTINEL), axis=1)))
@@ -213,14 +204,16 @@ def bench_mesh(bpy, fname: str, scale_length: float, note: str, repeat: int, ver
         f"   memory of one segment call: tracemalloc peak {mem['tracemalloc_peak_mb']:.1f} MB "
         f"(Python objects + numpy buffers allocated during the call); peak RSS growth "
         f"{mem['rss_delta_mb']:.1f} MB (ru_maxrss during the call {mem['rss_peak_mb']:.0f} MB minus RSS before "
-        f"{mem['rss_before_mb']:.0f} MB{'' if mem['rss_hwm_reset'] else '; high-water mark NOT reset, delta is over the earlier process peak'})"
+        f"{mem['rss_before_mb']:.0f} MB"
+        f"{'' if mem['rss_hwm_reset'] else '; high-water mark NOT reset, delta is over the earlier process peak'})"
     )
 
     # 2. wall time, eta = 5 (the default smoothing), best of `repeat`
     seg_best, seg_all, seg5 = timed_segment(bpy, ob, ETA, repeat, verbose)
     table5 = seg5["table"]
     smoothing = table5.get("smoothing_mm")
-    row.update(segment_s=seg_best, segment_runs_s=seg_all, segment_repeatable=seg5["repeatable"], smoothing_mm=smoothing)
+    row.update(segment_s=seg_best, segment_runs_s=seg_all, segment_repeatable=seg5["repeatable"],
+               smoothing_mm=smoothing)
     print(
         f"   bolus.segment(patches={PATCHES}, eta={ETA:g}, seed={SEED}, smoothing {smoothing:g} mm): "
         f"best of {repeat} {seg_best:.3f} s  (runs: {', '.join(f'{t:.3f}' for t in seg_all)})"
@@ -233,13 +226,15 @@ def bench_mesh(bpy, fname: str, scale_length: float, note: str, repeat: int, ver
     all_faces = sp_check["faces_selected"] == sp_check["faces"] and sp_check["loops_not_unwrapped"] == 0
     print(
         f"   uv.smart_project() (defaults, Edit Mode, all faces selected): best of {repeat} {sp_best:.3f} s  "
-        f"(runs: {', '.join(f'{t:.3f}' for t in sp_all)}); faces selected {sp_check['faces_selected']}/{sp_check['faces']}, "
+        f"(runs: {', '.join(f'{t:.3f}' for t in sp_all)}); "
+        f"faces selected {sp_check['faces_selected']}/{sp_check['faces']}, "
         f"loops left un-unwrapped {sp_check['loops_not_unwrapped']}, UVs in [0,1]: {sp_check['uv_in_unit_square']}"
         f"{'' if all_faces else '  WARNING: NOT RUN ON ALL FACES'}"
     )
     ratio = seg_best / sp_best if sp_best > 0 else float("inf")
     row["ratio"] = ratio
-    print(f"   ratio segment / smart_project = {ratio:.1f}x (target <= {TARGET_RATIO:g}x: {'met' if ratio <= TARGET_RATIO else 'NOT met'})")
+    print(f"   ratio segment / smart_project = {ratio:.1f}x (target <= {TARGET_RATIO:g}x: "
+          f"{'met' if ratio <= TARGET_RATIO else 'NOT met'})")
 
     # 4. plain spectral clustering (eta = 0) against eta = 5, same seed/patches/smoothing
     table0 = run_segment(bpy, ob, 0.0, verbose)
@@ -344,10 +339,7 @@ def main(argv=None) -> int:
         "repeat": repeat,
         "segment_args": {"patches": PATCHES, "eta": ETA, "seed": SEED, "smoothing": "default"},
         "target_ratio": TARGET_RATIO,
-        "memory_labels": {
-            "tracemalloc_peak_mb": "peak of Python objects and numpy buffers allocated during one segment call (tracemalloc)",
-            "rss_delta_mb": "process peak RSS (ru_maxrss, high-water mark reset before the call) minus RSS before the call",
-        },
+        "memory_labels": MEMORY_LABELS,
         "meshes": rows,
     }, total, markdown(rows, repeat, argv))
     return 0

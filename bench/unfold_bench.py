@@ -77,7 +77,7 @@ import sys
 import time
 
 import benchutil
-from benchutil import SHARED_MESHES, Table, captured_output, clean_scene, pct
+from benchutil import SHARED_MESHES, Table, captured_output, clean_scene, pct, timed_uv_operator
 
 CAP_R = 100.0
 CAP_SUBDIV = 6
@@ -119,7 +119,7 @@ def measure(V, F, UV) -> dict:
     import numpy as np
 
     from bolus_addon.core.overlap import overlapping_faces, signed_areas
-    from bolus_addon.core.unfold import length_area_errors
+    from bolus_addon.core.measures import length_area_errors
 
     EL, EA = length_area_errors(V, F, UV)
     A = signed_areas(UV, F)
@@ -345,7 +345,7 @@ def explicit_cap(cut, budget_s: float) -> tuple[int, float]:
     import numpy as np
 
     from bolus_addon.core.topology import MeshTopology
-    from bolus_addon.core.unfold import build_springs, spring_energy
+    from bolus_addon.core.springs import build_springs, spring_energy
 
     topo = MeshTopology(cut.V, cut.F)
     springs = build_springs(topo)
@@ -520,29 +520,15 @@ def run_blender(bpy, ob, cut, method: str, repeat: int, iterations: int | None =
     me = ob.data
     times, messages = [], []
     for _ in range(repeat):
-        bpy.context.view_layer.objects.active = ob
-        bpy.ops.object.mode_set(mode="EDIT")
-        bpy.ops.mesh.select_mode(type="FACE")
-        bpy.ops.mesh.reveal()
-        bpy.ops.mesh.select_all(action="SELECT")
-        gc.collect()
-        with captured_output() as out:
-            t0 = time.perf_counter()
-            res = bpy.ops.uv.unwrap(method=method, margin=0.0, **kw)
-            dt = time.perf_counter() - t0
-        ob.update_from_editmode()
-        selected = me.total_face_sel
-        bpy.ops.object.mode_set(mode="OBJECT")
-        if res != {"FINISHED"}:
-            raise RuntimeError(f"uv.unwrap({method}) returned {res}:\n{out()}")
+        dt, selected, messages = timed_uv_operator(bpy, ob, bpy.ops.uv.unwrap, f"uv.unwrap({method})", method=method,
+                                                   margin=0.0, **kw)
         times.append(dt)
-        messages = [ln.strip() for ln in out().splitlines() if ln.strip()]
     Vm, Fm, UV, per_vertex, spread = blender_uv(bpy, ob, cut)
     UV, scale, mirrored = true_scale(Vm, Fm, UV)
     row.update(measure(Vm, Fm, UV))
     # the same UVs at the scale that is best for EL (SLIM at its best; flips and overlaps do not change)
     s_opt = el_optimal_scale(Vm, Fm, UV)
-    from bolus_addon.core.unfold import length_area_errors
+    from bolus_addon.core.measures import length_area_errors
 
     el, ea = length_area_errors(Vm, Fm, s_opt * UV)
     row["el_optimal"] = {"scale": s_opt, "EL": el, "EA": ea}

@@ -26,7 +26,7 @@ def bench():
 
 
 def el_of(V, F, UV):
-    from bolus_addon.core.unfold import length_area_errors
+    from bolus_addon.core.measures import length_area_errors
 
     return length_area_errors(V, F, UV)[0]
 
