@@ -41,6 +41,13 @@ def pattern_pieces(context, pat: bpy.types.Object) -> list[dict]:
     return svg_pieces(region.V, region.F, region.tri_poly, poly_patch, table_rows(pat.get(PROP_PATTERN_TABLE)))
 
 
+def default_svg_path(active_name: str | None, blend_dir: str | None) -> str:
+    """``<source>_pattern.svg`` beside the .blend file (or relative when it is not saved),
+    the source's name also when its pattern object is the active one."""
+    base = (active_name or "pattern").removesuffix(PATTERN_SUFFIX) + "_pattern.svg"
+    return os.path.join(blend_dir, base) if blend_dir else base
+
+
 def _svg_path(filepath: str) -> str:
     """The absolute .svg path to write; BolusError when there is none or its folder is missing."""
     if not filepath:
@@ -68,8 +75,8 @@ class BOLUS_OT_export_pattern(BolusOperator, bpy.types.Operator):
     def invoke(self, context, event):
         if not self.filepath:
             obj = context.active_object
-            base = (obj.name if obj is not None else "pattern").removesuffix(PATTERN_SUFFIX) + "_pattern.svg"
-            self.filepath = bpy.path.abspath("//") + base if bpy.data.filepath else base
+            self.filepath = default_svg_path(obj.name if obj is not None else None,
+                                             bpy.path.abspath("//") if bpy.data.filepath else None)
         context.window_manager.fileselect_add(self)
         return {"RUNNING_MODAL"}
 

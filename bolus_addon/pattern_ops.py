@@ -47,7 +47,8 @@ class _UnfoldJob:
             poly_labels = np.zeros(len(region.mesh.polygons), dtype=np.int64)
             self.warnings.append(f"no '{ATTR_PATCH}' attribute (run Segment first): unfolded as a single patch")
         # a patch cut in two by the region (or edited) becomes one island per connected piece
-        self.islands = patch_islands(region.V, region.F, poly_labels[region.tri_poly], face_groups=region.tri_poly)
+        self.islands = patch_islands(region.V, region.F, poly_labels[region.tri_poly], face_groups=region.tri_poly,
+                                     vert_ids=region.vert_ids)
         if self.islands.left_out:  # expected when a region was segmented: said once, as INFO
             self.infos.append(f"{self.islands.left_out} faces outside the segmented patches (bolus_patch = -1) "
                               "were left out of the pattern")

@@ -366,8 +366,8 @@ def test_sixty_degree_cap_has_no_flipped_triangles(bpy_addon, scene):
     assert segments_cross(loops[0]["P"]) == 0, "the outline crosses itself"
     assert loops[0]["area"] > 0
     np.testing.assert_allclose(loops[0]["area"], m["A"].sum(), rtol=1e-6)
-    # a sphere cannot lie flat: some error, but a few percent (seed: mass-spring results)
-    assert 0.005 < m["EL"] < 0.05 and 0.005 < m["EA"] < 0.06, (m["EL"], m["EA"])
+    # a sphere cannot lie flat: some error, a few percent (issue 10: today's EL 3.56 %, EA 2.62 %, +-15 %)
+    assert m["EL"] == pytest.approx(0.0356, rel=0.15) and m["EA"] == pytest.approx(0.0262, rel=0.15), (m["EL"], m["EA"])
     assert json.loads(pat["bolus_pattern_table"])["flipped"] == 0
 
 
@@ -619,9 +619,12 @@ def test_unit_scale_is_honoured(bpy_addon, scene, tmp_path):
         results[case] = pattern_size_mm(bpy, src, tmp_path / f"{case}.svg")
     ref = results["mm_scene"]
     cap_area = 2 * math.pi * 100.0**2 * (1 - math.cos(math.radians(60)))  # the smooth cap, mm²
-    assert 0.8 * cap_area < ref["source_area"] < 1.05 * cap_area
-    # each half: half the rim (pi * 100 sin 60 = 272 mm) plus a meridian cut (209 mm), zigzagging along edges
-    assert len(ref["perimeter"]) == 2 and all(481.0 < p < 650.0 for p in ref["perimeter"]), ref["perimeter"]
+    # the subdivided icosahedron's cap is 0.6 % larger than the smooth one (its rim is not a circle)
+    assert ref["source_area"] == pytest.approx(31606.24, rel=1e-6) and ref["source_area"] > cap_area
+    # each half: half the rim (pi * 100 sin 60 = 272 mm) plus a meridian cut (209 mm), zigzagging along
+    # edges: 567.4 and 568.8 mm today (+-5 %); EL 1.09 %, EA 1.20 % (+-15 %)
+    assert ref["perimeter"] == pytest.approx([567.4, 568.8], rel=0.05), ref["perimeter"]
+    assert ref["EL"] == pytest.approx(0.0109, rel=0.15) and ref["EA"] == pytest.approx(0.0120, rel=0.15), ref
     for case, r in results.items():
         # the gap is 10 mm, in mm, whatever the unit (the two islands are side by side or stacked)
         assert abs(r["separation"] - 10.0) < 1e-3, (case, r["separation"])
@@ -726,8 +729,12 @@ BAD_MESHES = {
                       "zero-area triangle"),
     # one of the faces has zero area
     "one_zero_area": (np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0], [20, 0, 0], [30, 0, 0.0]]),
-                      [[0, 1, 2], [0, 2, 3], [1, 4, 5]], r"region has 1 zero-area triangle\(s\), e.g. triangle 2 "
-                      r"\(vertices 1, 4, 5\)"),
+                      [[0, 1, 2], [0, 2, 3], [1, 4, 5]], r"region has 1 zero-area triangle\(s\), e.g. the triangle on "
+                      r"vertices 1, 4, 5: coincident or collinear"),
+    # the same after a loose vertex: the message names the mesh's vertex indices, not the region's
+    "zero_area_after_loose_vertex": (np.array([[-9, -9, 0], [0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0],
+                                               [20, 0, 0], [30, 0, 0.0]]),
+                                     [[1, 2, 3], [1, 3, 4], [2, 5, 6]], r"e.g. the triangle on vertices 2, 5, 6:"),
     "one_triangle": (np.array([[0, 0, 0], [10, 0, 0], [0, 10, 1.0]]), [[0, 1, 2]], "too small"),
     "two_triangles": (np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 2.0]]), [[0, 1, 2], [0, 2, 3]],
                       "too small"),
@@ -779,6 +786,17 @@ def test_unfold_inconsistent_winding(bpy_addon, scene):
     m = spec_measure(bpy, src, pat)
     assert np.abs(m["L"] - m["L0"]).max() < 1e-6 * m["L0"].max() + f32_slack(m["Vs"], m["Vp"]), \
         "a developable piece must unfold without stretching, whichever way its faces turn"
+
+
+def test_export_default_file_is_named_for_the_source(bpy_addon):
+    """The file browser's default: 'skin_pattern.svg' also when the pattern object 'skin_pattern' is
+    active and the .blend is not saved (it offered 'skin_pattern_pattern.svg')."""
+    from bolus_addon.pattern_export_ops import default_svg_path
+
+    assert default_svg_path("skin_pattern", None) == "skin_pattern.svg"
+    assert default_svg_path("skin", None) == "skin_pattern.svg"
+    assert default_svg_path(None, None) == "pattern_pattern.svg"
+    assert default_svg_path("skin_pattern", "/tmp/case 7/") == "/tmp/case 7/skin_pattern.svg"
 
 
 @pytest.mark.smoke
@@ -836,7 +854,10 @@ def test_badly_shrunk_cap_is_warned_with_its_figures_and_the_dome_advice(bpy_add
     assert bpy.ops.bolus.segment(patches=4) == {"FINISHED"}
     assert bpy.ops.bolus.unfold() == {"FINISHED"}
     worst = max(r["EL"] for r in json.loads(pattern_of(bpy, src)["bolus_pattern_table"])["islands"])
-    assert worst < 0.6 * m["EL"], (worst, m["EL"])
+    # today: one piece EL 16.0 %, EA 10.2 %, area 0.91 of the skin; the worst of 4 pieces EL 3.2 % (+-15 %)
+    assert worst == pytest.approx(0.0319, rel=0.15), (worst, m["EL"])
+    assert m["EL"] == pytest.approx(0.160, rel=0.15) and m["EA"] == pytest.approx(0.102, rel=0.15)
+    assert ratio == pytest.approx(0.910, rel=0.15)
 
 
 def test_thirty_degree_cap_is_not_warned(bpy_addon, scene, capfd):
@@ -848,6 +869,8 @@ def test_thirty_degree_cap_is_not_warned(bpy_addon, scene, capfd):
     assert warning_lines(out) == [], out
     row = json.loads(pattern_of(bpy, src)["bolus_pattern_table"])["islands"][0]
     assert not row["warn"] and row["EL"] < 0.03 and row["EA"] < 0.03
+    # today's figures: EL 0.99 %, EA 0.70 % (+-15 %)
+    assert row["EL"] == pytest.approx(0.0099, rel=0.15) and row["EA"] == pytest.approx(0.0070, rel=0.15)
 
 
 @pytest.fixture

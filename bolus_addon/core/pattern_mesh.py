@@ -25,12 +25,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .assemble import assemble_pattern
 from .errors import BolusError
+from .measures import polygon_area_error, polygon_errors
 from .overlap import as_pattern_arrays, signed_areas
 from .piece_advice import DEFAULT_WARN_FRACTION, piece_advice
 from .saliency import DEFAULT_SMOOTHING_MM
 from .topology import MeshTopology, check_mesh, face_areas, submesh
-from .unfold import assemble_pattern, polygon_area_error, polygon_errors
 
 __all__ = [
     "PatchIslands",
@@ -63,28 +64,31 @@ class PatchIslands:
         return len(self.island_patch)
 
 
-def patch_islands(V, F, tri_labels, face_groups=None) -> PatchIslands:
+def patch_islands(V, F, tri_labels, face_groups=None, vert_ids=None) -> PatchIslands:
     """Split every patch into its edge-connected pieces.
 
     Parameters
     ----------
-    V : (n,3) mm, F : (m,3) int - the region (checked by `topology.check_mesh`: zero-area
+    V : (n,3) mm, F : (m,3) int - the region (checked by `topology.check_mesh`; zero-area
         triangles are refused by name, they have no shape to unfold)
     tri_labels : (m,) int - patch of every triangle, -1 outside every patch
     face_groups : (m,) int, optional - the face (polygon) of every triangle, for `left_out`
+    vert_ids : (n,) int, optional - the user's index of every vertex, for the messages
 
     Returns
     -------
     PatchIslands; islands are numbered in the order of their lowest component id.
     """
-    V, F = check_mesh(V, F, "the region")
+    V, F = check_mesh(V, F, "the region", nondegenerate=False)
+    topo = MeshTopology(V, F)
+    topo.require_nondegenerate("the region", vert_ids)
     labels = np.asarray(tri_labels)
     if labels.shape != (len(F),) or not np.issubdtype(labels.dtype, np.integer):
         raise BolusError(f"patch labels must be one integer per triangle ({len(F)}), got shape {labels.shape}")
     outside = labels < 0
     if outside.all():
         raise BolusError("none of the region's faces belongs to a patch: run Segment on this region first")
-    _, comp = MeshTopology(V, F).face_components(np.where(outside, -1, labels))
+    _, comp = topo.face_components(np.where(outside, -1, labels))
     comp = np.where(outside, -1, comp)
     uniq, islands = np.unique(comp, return_inverse=True)
     islands = islands.reshape(-1) - (1 if (uniq < 0).any() else 0)
@@ -190,7 +194,7 @@ class PatternBuild:
 
 def build_pattern(V, F, tri_poly, vert_ids, islands: PatchIslands, unfoldings: list, poly_labels,
                   loop_start, loop_total, loop_vert, mm_per_unit: float, gap_mm: float) -> PatternBuild:
-    """Lay the unfolded islands out (`unfold.assemble_pattern`) and measure them as SPEC does.
+    """Lay the unfolded islands out (`assemble.assemble_pattern`) and measure them as SPEC does.
 
     Parameters
     ----------
