@@ -59,14 +59,10 @@ class BOLUS_OT_saliency_preview(BolusOperator, bpy.types.Operator):
         res = analyse(region.V, region.F, self.smoothing_mm, topo=topo)
         self.progress(0.8, "writing attributes")
         obj, me = region.obj, region.mesh
-        nv = len(me.vertices)
-        varpi = np.zeros(nv)
-        sal = np.zeros(nv)
-        varpi[region.vert_ids] = res.varpi
-        sal[region.vert_ids] = res.saliency
-        shown = sal if self.color_by == "SALIENCY" else varpi
-        colors = np.tile(outside_linear_rgba(), (nv, 1))
-        colors[region.vert_ids] = scalar_to_linear_rgba(shown[region.vert_ids])
+        varpi = region.on_vertices(res.varpi, 0.0)
+        sal = region.on_vertices(res.saliency, 0.0)
+        shown = res.saliency if self.color_by == "SALIENCY" else res.varpi
+        colors = region.on_vertices(scalar_to_linear_rgba(shown), outside_linear_rgba())
         with mesh_io.object_mode(obj):
             mesh_io.write_attribute(me, ATTR_FLATTENABILITY, "FLOAT", "POINT", varpi)
             mesh_io.write_attribute(me, ATTR_SALIENCY, "FLOAT", "POINT", sal)
@@ -119,9 +115,7 @@ class BOLUS_OT_segment(BolusOperator, bpy.types.Operator):
             topo=topo,
         )
         obj, me = region.obj, region.mesh
-        npoly = len(me.polygons)
-        poly_labels = np.full(npoly, -1, dtype=np.int64)
-        poly_labels[region.tri_poly] = seg.face_labels
+        poly_labels = region.on_polygons(seg.face_labels.astype(np.int64), -1)
         seams = mesh_io.polygon_edge_labels(me, poly_labels)
         touched = mesh_io.edges_of_polygons(me, region.poly_ids)
         table = [p.as_dict() for p in seg.patches]

@@ -64,6 +64,22 @@ class Region:
     def mesh(self) -> bpy.types.Mesh:
         return self.obj.data
 
+    def on_vertices(self, values, fill=0.0) -> np.ndarray:
+        """Values (n, ...) on the region's vertices -> one per mesh vertex, ``fill`` (a scalar or
+        one row, e.g. an RGBA colour) elsewhere."""
+        values = np.asarray(values)
+        out = np.full((len(self.mesh.vertices),) + values.shape[1:], fill, dtype=np.result_type(values, fill))
+        out[self.vert_ids] = values
+        return out
+
+    def on_polygons(self, values, fill=-1) -> np.ndarray:
+        """Values (m, ...) on the region's triangles -> one per mesh polygon (a polygon takes
+        the value of its triangles, which must agree), ``fill`` outside the region."""
+        values = np.asarray(values)
+        out = np.full((len(self.mesh.polygons),) + values.shape[1:], fill, dtype=np.result_type(values, fill))
+        out[self.tri_poly] = values
+        return out
+
 
 def get_array(coll, attr: str, n: int, dtype, width: int = 1) -> np.ndarray:
     out = np.empty(n * width, dtype=dtype)
