@@ -240,8 +240,9 @@ def test_saliency_smoothing_changes_values_not_positions(bpy_addon, scene):
     after = mesh_snapshot(me)
     for x, y in zip(before[:3], after[:3]):
         np.testing.assert_array_equal(x, y)
-    # smoothing removes small-scale angle noise: the total goes down, zeros stay zeros
-    assert smooth.sum() < 0.9 * raw.sum()
+    # smoothing at 5 mm removes small-scale angle noise: the total goes down to 0.57 of
+    # the raw one on this face (measured 2026-12, pinned at +-15 %); zeros stay zeros
+    assert smooth.sum() / raw.sum() == pytest.approx(0.572, rel=0.15)
     assert np.all(smooth[raw == 0] == 0)
     assert ob["bolus_sum_varpi"] == pytest.approx(smooth.sum(), rel=1e-5)
 

@@ -72,8 +72,10 @@ def test_smoothing_removes_scanner_noise_but_never_moves_the_mesh():
     smooth = analyse(V, F, 3.0)
     clean = analyse(*_noisy_cap(0.0), 0.0)
     np.testing.assert_array_equal(V, V0)  # input untouched
-    assert raw.sum_varpi > 3 * clean.sum_varpi  # noise drowns the signal ...
-    assert smooth.sum_varpi < 0.5 * raw.sum_varpi  # ... smoothing brings it back
+    # noise drowns the signal (44x the clean sum) and smoothing at 3 mm takes 90 % of it
+    # away again (figures measured 2026-12, pinned at +-15 %)
+    assert raw.sum_varpi / clean.sum_varpi == pytest.approx(44.0, rel=0.15)
+    assert smooth.sum_varpi / raw.sum_varpi == pytest.approx(0.094, rel=0.15)
     # smoothing keeps boundary vertices where they are and maps 1:1 to the input
     t = MeshTopology(V, F)
     np.testing.assert_array_equal(smooth.V_analysis[t.boundary_vertices], V[t.boundary_vertices])
