@@ -31,11 +31,12 @@ Every benchmark patch is first cut to a disk with ``cutting.cut_to_disk(V, F)``
   into the unit square), and measured again at the factor that minimises their EL
   (``el_optimal_scale``: exact, a weighted median), so SLIM is shown at its best;
 * the ablation (unless ``--no-ablation``): ``unfold_patch`` with its stage switches,
-  each stage adding one step to the one before (``ABLATION``): (a') the seed's 4.5.1
-  start alone, (a) the default conformal start alone, (b) + springs without crossed
-  springs, (c) + crossed springs, (d) + disturbing springs (= refine=0 above), (e) +
-  the L1 length refinement (= the default above); every call ends with the same
-  flip / overlap correction, so each stage's result is a valid pattern.
+  each stage adding one step to the one before (``ABLATION``): (a) the default
+  conformal start alone, (b) + springs without crossed springs, (c) + crossed springs,
+  (d) + disturbing springs (= refine=0 above), (e) + the L1 length refinement (= the
+  default above); beside them (a') the seed's 4.5.1 start alone and (e') the default
+  without crossed springs; every call ends with the same flip / overlap correction,
+  so each stage's result is a valid pattern.
 
 Measures, as SPEC.md defines them (``unfold.length_area_errors``: three edges and
 the *signed* area of every triangle against its 3D counterpart, no other scale
@@ -366,21 +367,27 @@ OURS_RUNS = {
     "default": ("ours lbfgs (default)", {"method": "lbfgs"}),
     "lbfgs0": ("ours lbfgs refine=0", {"method": "lbfgs", "refine_rounds": 0}),
     "explicit": ("ours explicit refine=0", {"method": "explicit", "refine_rounds": 0}),
-    "start_greedy": ("(a') 4.5.1 start alone", {"relax": False, "refine_rounds": 0, "start": "greedy"}),
     "start": ("(a) initial unfolding alone", {"relax": False, "refine_rounds": 0}),
+    "start_greedy": ("(a') 4.5.1 start alone", {"relax": False, "refine_rounds": 0, "start": "greedy"}),
     "tension": ("(b) + springs, no crossed", {"crossed_springs": False, "disturbing_springs": False,
                                                "refine_rounds": 0}),
     "crossed": ("(c) + crossed springs", {"disturbing_springs": False, "refine_rounds": 0}),
+    "no_crossed": ("(e') default, no crossed", {"method": "lbfgs", "crossed_springs": False}),
 }
 
-#: the ablation's stages in order: (stage key, run key, label); each adds one step of the model
+#: the ablation's stages in order: (stage, run key, label, the stage it is compared with).  The
+#: chain a -> b -> c -> d -> e adds one step of the model at a time; a' and e' stand beside a and
+#: e with one step swapped or taken out (the seed's own start; the default without crossed springs).
 ABLATION = (
-    ("a'", "start_greedy", "4.5.1 coordinate transformation alone (start=\"greedy\", relax=False)"),
-    ("a", "start", "initial unfolding alone (the default conformal start, relax=False)"),
-    ("b", "tension", "+ spring relaxation, tension springs only (crossed_springs=False, disturbing_springs=False)"),
-    ("c", "crossed", "+ crossed springs (disturbing_springs=False)"),
-    ("d", "lbfgs0", "+ disturbing springs (refine_rounds=0)"),
-    ("e", "default", "+ L1 length refinement = the full default"),
+    ("a", "start", "initial unfolding alone (the default conformal start, relax=False)", None),
+    ("a'", "start_greedy", "the seed's 4.5.1 coordinate transformation alone instead (start=\"greedy\", "
+     "relax=False)", "a"),
+    ("b", "tension", "+ spring relaxation, tension springs only (crossed_springs=False, disturbing_springs=False)",
+     "a"),
+    ("c", "crossed", "+ crossed springs (disturbing_springs=False)", "b"),
+    ("d", "lbfgs0", "+ disturbing springs (refine_rounds=0)", "c"),
+    ("e", "default", "+ L1 length refinement = the full default", "d"),
+    ("e'", "no_crossed", "the full default without crossed springs (crossed_springs=False)", "e"),
 )
 ABLATION_SWITCHES = ("relax", "crossed_springs", "disturbing_springs", "refine_rounds", "start")
 
@@ -553,6 +560,12 @@ def run_blender(bpy, ob, cut, method: str, repeat: int, iterations: int | None =
 SLIM_KEYS = ("SLIM-10", "SLIM-100")
 
 
+def pts(x) -> str:
+    """A signed change in points, two decimals, without a "-0.00"."""
+    v = round(float(x), 2)
+    return f"{v + 0.0:+.2f}" if v != 0 else "+0.00"
+
+
 def ratio(a, b):
     return a / b if b and b > 0 else float("nan")
 
@@ -636,7 +649,7 @@ def bench_patch(bpy, patch: dict, args) -> dict:
     repeat = 1 if big else args.repeat
     kinds = ["default", "lbfgs0"] + ([] if args.quick or big else ["explicit"])
     if args.ablation:
-        kinds += [k for _, k, _ in ABLATION if k not in kinds]
+        kinds += [k for _, k, _, _ in ABLATION if k not in kinds]
     for kind in kinds:
         try:
             methods[kind] = run_ours(V, F, cut, kind, repeat, args.explicit_budget)
@@ -723,10 +736,10 @@ def slim_line(rows: list[dict]) -> str:
     d_it = np.array([100 * (b["EL"] - a["EL"]) for _, a, b in pairs])
     d_sc = np.array([100 * (b["el_optimal"]["EL"] - b["EL"]) for _, _, b in pairs])
     k = int(np.argmin(d_it))
-    return (f"SLIM 100 against 10 iterations (true-area scale): EL changes by {d_it.min():+.2f} to {d_it.max():+.2f} "
-            f"points (median {np.median(d_it):+.2f}; largest drop {pairs[k][0]}: {pct(pairs[k][1]['EL'])} -> "
+    return (f"SLIM 100 against 10 iterations (true-area scale): EL changes by {pts(d_it.min())} to {pts(d_it.max())} "
+            f"points (median {pts(np.median(d_it))}; largest drop {pairs[k][0]}: {pct(pairs[k][1]['EL'])} -> "
             f"{pct(pairs[k][2]['EL'])} %). SLIM-100's EL-optimal scale against its true-area scale: "
-            f"{d_sc.min():+.2f} to {d_sc.max():+.2f} points (median {np.median(d_sc):+.2f}).")
+            f"{pts(d_sc.min())} to {pts(d_sc.max())} points (median {pts(np.median(d_sc))}).")
 
 
 # ----------------------------------------------------------------------------- ablation
@@ -740,20 +753,19 @@ def ablation_table(rows: list[dict]) -> Table:
         if "error" in r:
             t.add_error(r["patch"], r["error"])
             continue
-        prev = None
-        for n, (stage, key, _) in enumerate(ABLATION):
-            m = r["methods"].get(key)
+        key = {stage: k for stage, k, _, _ in ABLATION}
+        for n, (stage, k, _, base) in enumerate(ABLATION):
+            m = r["methods"].get(k)
             if m is None:
                 continue
             name = r["patch"] + (" (H)" if r.get("hopeless") else "") if n == 0 else ""
             if "EL" not in m:
                 t.add(name, stage, "n/a", "n/a", "", "", "", "", m.get("error", m.get("na", ""))[:80])
-                prev = None if stage != "a'" else prev
                 continue
-            d = (f"{100 * (m['EL'] - prev['EL']):+.2f}", f"{100 * (m['EA'] - prev['EA']):+.2f}") if prev else ("", "")
+            prev = r["methods"].get(key[base], {}) if base else {}
+            d = ((f"{pts(100 * (m['EL'] - prev['EL']))}", f"{pts(100 * (m['EA'] - prev['EA']))}") if "EL" in prev
+                 else ("", ""))
             t.add(name, stage, pct(m["EL"]), pct(m["EA"]), fo(m), sec(m), *d, stage_note(m))
-            if stage != "a'":  # (a') is beside (a), not before it
-                prev = m
     return t
 
 
@@ -768,13 +780,11 @@ def stage_note(m: dict) -> str:
 
 
 def stage_effects(rows: list[dict], eps_pts: float = 0.05) -> Table:
-    """What each stage earns over all patches: the change of EL and EA against the stage before it."""
+    """What each stage earns over the patches not flagged hopeless: EL and EA against the stage it builds on."""
     import numpy as np
 
-    steps = [("a'", "a", "conformal start instead of 4.5.1 (a' -> a)")]
-    steps += [(ABLATION[k - 1][0], ABLATION[k][0], f"{ABLATION[k][0]}: {ABLATION[k][2]}")
-              for k in range(2, len(ABLATION))]
-    key = {stage: k for stage, k, _ in ABLATION}
+    steps = [(base, stage, f"{stage} against {base}: {label}") for stage, _, label, base in ABLATION if base]
+    key = {stage: k for stage, k, _, _ in ABLATION}
     t = Table([("step", "<"), ("patches", ">"), ("ΔEL median", ">"), ("ΔEL range", ">"),
                ("EL lower / same / higher", ">"),
                ("ΔEA median", ">"), ("ΔEA range", ">"), ("EA lower / same / higher", ">"), ("Δs median", ">")])
@@ -787,21 +797,22 @@ def stage_effects(rows: list[dict], eps_pts: float = 0.05) -> Table:
         cells = []
         for q in ("EL", "EA"):
             d = np.array([100 * (y[q] - x[q]) for x, y in pairs])
-            cells += [f"{np.median(d):+.2f}", f"{d.min():+.2f} .. {d.max():+.2f}",
+            cells += [f"{pts(np.median(d))}", f"{pts(d.min())} .. {pts(d.max())}",
                       f"{(d < -eps_pts).sum()} / {(abs(d) <= eps_pts).sum()} / {(d > eps_pts).sum()}"]
         ds = np.array([y["seconds"] - x["seconds"] for x, y in pairs])
-        t.add(label, len(pairs), *cells, f"{np.median(ds):+.2f}")
+        t.add(label, len(pairs), *cells, f"{pts(np.median(ds))}")
     return t
 
 
 def ablation_legend() -> str:
     return ("Each stage is one `unfold_patch` call with the stage switches (`relax=`, `crossed_springs=`, "
-            "`disturbing_springs=`, `refine_rounds=`, `start=`); every stage adds one step of the model to the "
-            "stage before it: "
-            + "; ".join(f"({s}) {label}" for s, _, label in ABLATION)
+            "`disturbing_springs=`, `refine_rounds=`, `start=`); from (a) to (e) every stage adds one step of the "
+            "model to the stage before it, (a') and (e') stand beside (a) and (e): "
+            + "; ".join(f"({s}) {label}" for s, _, label, _ in ABLATION)
             + ". Every call ends with the same flip and overlap correction (4.5.3) so that each result is a valid "
-            "pattern, and its time is the whole call (cut included). ΔEL, ΔEA: percentage points against the "
-            "stage before ((a') against nothing; it is the seed's own start, beside (a)).")
+            "pattern (skipped where the call flags the patch hopeless: H), and its time is the whole call (cut "
+            "included). ΔEL, ΔEA: percentage points against the stage it builds on (b against a, ..., a' against "
+            "a, e' against e).")
 
 
 # ----------------------------------------------------------------------------- markdown
@@ -926,7 +937,8 @@ def main(argv=None) -> int:
         "unwrap_defaults": {k: (v if isinstance(v, (int, float, str, bool)) else str(v)) for k, v in defaults.items()},
         "targets": {"EL_ratio_best_slim": TARGET_EL, "EA_ratio_best_slim": TARGET_EA,
                     "time_ratio_slim100": TARGET_TIME},
-        "ablation": [{"stage": s, "run": k, "what": w} for s, k, w in ABLATION] if args.ablation else None,
+        "ablation": [{"stage": s, "run": k, "what": w, "against": b} for s, k, w, b in ABLATION]
+        if args.ablation else None,
         "units": "EL, EA fractions (not %); seconds wall clock; lengths mm",
         "patches": rows,
     }, total, markdown(rows, args, argv))

@@ -84,8 +84,9 @@ def test_ablation_stages_add_one_step_each(bench):
     more step of the model, ending at the default call; every switch exists on unfold_patch."""
     _, ub = bench
     assert ub.ablation_missing() == []
-    kw = {stage: ub.OURS_RUNS[key][1] for stage, key, _ in ub.ABLATION}
-    assert [s for s, _, _ in ub.ABLATION] == ["a'", "a", "b", "c", "d", "e"]
+    kw = {stage: ub.OURS_RUNS[key][1] for stage, key, _, _ in ub.ABLATION}
+    assert [(s, b) for s, _, _, b in ub.ABLATION] == [("a", None), ("a'", "a"), ("b", "a"), ("c", "b"), ("d", "c"),
+                                                      ("e", "d"), ("e'", "e")]
     full = {"relax": True, "crossed_springs": True, "disturbing_springs": True, "refine_rounds": 3,
             "start": "auto", "method": "lbfgs"}
 
@@ -103,12 +104,14 @@ def test_ablation_stages_add_one_step_each(bench):
     assert diff("b", "c") == {"crossed_springs"}
     assert diff("c", "d") == {"disturbing_springs"}
     assert diff("d", "e") == {"refine_rounds"}
+    assert diff("e", "e'") == {"crossed_springs"}
     assert effective("e") == full
 
 
 def fake_row(name, stages, hopeless=False):
     """A benchmark row with the ablation's runs (EL, EA fractions)."""
-    key = {"a'": "start_greedy", "a": "start", "b": "tension", "c": "crossed", "d": "lbfgs0", "e": "default"}
+    key = {"a'": "start_greedy", "a": "start", "b": "tension", "c": "crossed", "d": "lbfgs0", "e": "default",
+           "e'": "no_crossed"}
     methods = {key[s]: {"EL": el, "EA": ea, "flipped": 0, "overlaps": 0, "seconds": t, "warnings": []}
                for s, (el, ea, t) in stages.items()}
     return {"patch": name, "hopeless": hopeless, "methods": methods}
@@ -117,19 +120,23 @@ def fake_row(name, stages, hopeless=False):
 def test_ablation_tables_show_the_change_of_each_stage(bench):
     bu, ub = bench
     stages = {"a'": (0.10, 0.20, 0.1), "a": (0.08, 0.15, 0.1), "b": (0.05, 0.08, 1.0), "c": (0.05, 0.06, 1.1),
-              "d": (0.051, 0.061, 1.2), "e": (0.04, 0.05, 1.5)}
+              "d": (0.051, 0.061, 1.2), "e": (0.04, 0.05, 1.5), "e'": (0.04, 0.052, 1.4)}
     rows = [fake_row("p", stages), fake_row("q", stages), fake_row("pocket", {"a": (0.3, 0.5, 0.1)}, hopeless=True)]
     md = ub.ablation_table(rows).markdown().splitlines()
     assert md[0].startswith("| patch | stage | EL % | EA % |")
     assert len({line.count("|") for line in md}) == 1  # every row has every column
     b_row = next(line for line in md if "| b |" in line)
     assert "| 5.00 | 8.00 |" in b_row and "| -3.00 | -7.00 |" in b_row  # against (a), not (a')
+    a1_row = next(line for line in md if "| a' |" in line)
+    assert "| +2.00 | +5.00 |" in a1_row  # (a') against (a)
     effects = ub.stage_effects(rows).rows
-    by_step = {r[0].split(":")[0]: r for r in effects}
+    by_step = {r[0].split(" ")[0]: r for r in effects}
     assert by_step["b"][1] == "2"  # the hopeless patch is left out
     assert by_step["c"][2] == "+0.00" and by_step["c"][4] == "0 / 2 / 0"  # crossed springs: EL the same
     assert by_step["c"][5] == "-2.00" and by_step["c"][7] == "2 / 0 / 0"  # ... EA 2 points lower
     assert by_step["e"][4] == "2 / 0 / 0"
+    assert by_step["e'"][2] == "+0.00" and by_step["e'"][5] == "+0.20"  # without crossed springs at the end
+    assert list(by_step) == ["a'", "b", "c", "d", "e", "e'"]
 
 
 def test_table_text_and_markdown(bench, tmp_path):
