@@ -26,7 +26,7 @@ from .geometry2d import cross2d
 from .overlap import signed_areas
 from .relax import relax_lbfgs
 from .springs import Springs, sub_springs
-from .topology import MeshTopology
+from .topology import MeshTopology, check_mesh
 
 __all__ = ["initial_unfolding", "conformal_unfolding", "STRIPE_DIRECTIONS"]
 
@@ -37,6 +37,16 @@ RELAX_GROWTH = 2.0  # the unfolded part is relaxed each time its vertex count gr
 RELAX_FIRST = 64  # ... but not before this many vertices are placed
 ANGLE_SCALE_CLIP = (0.5, 2.0)  # eq. 4-24's angle factor stays in this range (a wild factor folds the layer)
 PARALLEL_DET = 1e-14  # a stripe line and a triangle edge this close to parallel do not cross
+
+
+def _require_patch(topo: MeshTopology) -> None:
+    """`topology.check_mesh` (zero-area triangles, non-manifold edges), and every vertex in a
+    triangle (an unused vertex has no place in the plane: the conformal system is singular)."""
+    check_mesh(topo.V, topo.F, "the patch", manifold=True)
+    unused = np.nonzero(~topo.used_vertices)[0]
+    if len(unused):
+        raise BolusError(f"the patch has {len(unused)} vertex(es) in no triangle, e.g. vertex {int(unused[0])}: "
+                         "unfold the patch's triangles only (topology.submesh)")
 
 
 def _boundary_layers(topo: MeshTopology) -> np.ndarray:
@@ -282,10 +292,16 @@ def initial_unfolding(topo: MeshTopology, directions: int = STRIPE_DIRECTIONS,
     far is relaxed by the mass-spring model each time it has doubled (the seed's second
     overlap-prevention method, 4.5.3: "optimize unfolded triangles after unfolding each
     adjacent triangle crossing"), so that errors do not pile up into folds.
-    Returns UV (n,2).  Raises `BolusError` on zero-area triangles (no angles, naming the
-    first) and when some faces are not connected to the rest.
+    Returns UV (n,2).  Raises `BolusError` (`topology.check_mesh`, naming the first) on
+    zero-area triangles (no angles), non-manifold edges and vertices in no triangle, and
+    when some faces are not connected to the rest.
     """
-    topo.require_nondegenerate("the patch")
+    _require_patch(topo)
+    return _greedy(topo, directions, springs)
+
+
+def _greedy(topo: MeshTopology, directions: int = STRIPE_DIRECTIONS, springs: Springs | None = None) -> np.ndarray:
+    """`initial_unfolding` without the input check (for callers that checked the patch already)."""
     F, n = topo.F, topo.n
     UV = _central_crossing(topo, directions)
     placed_v = ~np.isnan(UV[:, 0])
@@ -316,10 +332,16 @@ def conformal_unfolding(topo: MeshTopology) -> np.ndarray:
     Parameters: topo, a disk-like patch's `MeshTopology` (V (n,3), F (m,3)).
     Returns UV (n,2), counter-clockwise, sum of 2D areas = sum of 3D areas.  LSCM is the
     minimiser of a convex quadratic, so it has no accumulated error; two far-apart
-    boundary vertices are pinned.  Raises `BolusError` on zero-area triangles (naming the
-    first): they make the system singular.
+    boundary vertices are pinned.  Raises `BolusError` (`topology.check_mesh`, naming the
+    first) on zero-area triangles and vertices in no triangle (they make the system
+    singular) and non-manifold edges.
     """
-    topo.require_nondegenerate("the patch")
+    _require_patch(topo)
+    return _conformal(topo)
+
+
+def _conformal(topo: MeshTopology) -> np.ndarray:
+    """`conformal_unfolding` without the input check (for callers that checked the patch already)."""
     A = _lscm_matrix(topo)
     n = topo.n
     fixed, vals = _lscm_pins(topo)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .measures import check_positions
 from .overlap import signed_areas
 from .relax import relax_lbfgs
 from .springs import Springs
@@ -57,11 +58,11 @@ def refine_lengths_l1(UV, springs: Springs, face_count: np.ndarray, rounds: int 
     penalty); progress(fraction).
     Returns (UV (n,2), iterations).
     """
+    X = check_positions(UV, None, "the pattern", int(springs.ends.max()) + 1 if len(springs.ends) else 0)
     nt = springs.n_tension
     no_windows = np.zeros((0, springs.contour_edges.shape[1]), dtype=np.int64)
     sp_ = Springs(springs.ends, springs.rest, springs.stiffness.copy(), nt, no_windows, np.zeros(0), np.zeros(0))
     rest = springs.rest[:nt]
-    X = UV
     its = 0
     for k in range(rounds):
         if progress is not None:

@@ -14,6 +14,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from .errors import BolusError
+from .measures import check_positions
 from .springs import Springs, area_terms, spring_energy, stiffness_laplacian
 
 __all__ = ["relax_lbfgs", "relax_explicit", "STOP_EVERY"]
@@ -27,6 +29,12 @@ STALL_WINDOW = 5  # relax_lbfgs stops when the energy fell by less than tol * E 
 ENERGY_FLOOR = 1e-28  # an energy this small is the exact minimum (a developable patch)
 CURVATURE_TOL = 1e-16  # an (s, y) pair is kept only if s.y > this * |s|^2 (positive curvature)
 EXPLICIT_CHECK = 100  # relax_explicit tests its stop criterion every this many steps
+
+
+def _start_positions(UV0, springs: Springs) -> np.ndarray:
+    """UV0 (n,2) float64, n covering every spring end; `BolusError` on a bad shape or NaN/inf (named)."""
+    n_min = int(springs.ends.max()) + 1 if len(springs.ends) else 0
+    return check_positions(UV0, None, "the start", n_min)[:, :2]
 
 
 def _factor_cache(springs: Springs, n: int):
@@ -135,7 +143,8 @@ def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, 
     gradient (2n,)) added to the energy; moving (n,) bool: only these vertices move;
     stop(UV, it): asked every `STOP_EVERY` iterations, True stops; progress(fraction of
     max_iter) about every 0.5 s; callback(UV) after every iteration.
-    Returns (UV (n,2), iterations, energy).
+    Returns (UV (n,2), iterations, energy).  `BolusError` if UV0 is not (n,2) covering
+    every spring end or has NaN/inf positions (named).
 
     The initial inverse Hessian of the two-loop recursion is gamma K^-1, K the springs'
     Hessian at rest (`stiffness_laplacian`, factorised once per stiffness and cached on
@@ -144,8 +153,8 @@ def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, 
     20k-triangle cap).  Stops when the energy decreased by less than tol * E over
     `STALL_WINDOW` iterations, after max_iter iterations, or when stop says so.
     """
-    n = len(UV0)
-    x = np.asarray(UV0, dtype=np.float64).copy()
+    x = _start_positions(UV0, springs).copy()
+    n = len(x)
     fun = _objective(springs, n, F, A0, flip_weight, area_weights, extra, moving)
     apply_h0, apply_k = _preconditioner(springs, n, precondition, moving)
     e, g = fun(x)
@@ -203,10 +212,14 @@ def relax_explicit(UV0, springs: Springs, masses: np.ndarray, max_iter: int = 20
     one for the stiffest spring (dt = 0.5 sqrt(m_min / (c_max * degree))).
     Stops when the relative energy change over 100 steps falls below tol.
     progress(fraction of max_iter) is called about every 0.5 s.
-    Returns (UV (n,2), steps, energy).
+    Returns (UV (n,2), steps, energy).  `BolusError` on a bad UV0 (as `relax_lbfgs`) or
+    masses that are not (n,) positive.
     """
+    x = _start_positions(UV0, springs).ravel().copy()
     n = len(UV0)
-    x = np.asarray(UV0, dtype=np.float64).ravel().copy()
+    masses = np.asarray(masses, dtype=np.float64)
+    if masses.shape != (n,) or not (masses > 0).all():
+        raise BolusError(f"the masses must be {n} positive numbers (one per vertex, eq. 3-24)")
     v = np.zeros_like(x)
     m2 = np.repeat(np.maximum(masses, 1e-300), 2)
     deg = np.bincount(springs.ends.ravel(), minlength=n).max()

@@ -23,8 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .cutting import _edge_ids, boundary_loops
-from .errors import BolusError
-from .topology import MeshTopology
+from .topology import MeshTopology, check_mesh
 
 __all__ = ["Springs", "build_springs", "spring_energy", "area_terms", "stiffness_laplacian", "sub_springs",
            "CONTOUR_WINDOW", "CROSSED_WEIGHT"]
@@ -119,13 +118,17 @@ def build_springs(topo: MeshTopology, contour_window: int = CONTOUR_WINDOW, cros
     Parameters: topo, the patch's `MeshTopology` (V (n,3), F (m,3)); contour_window, the
     boundary edges per disturbing spring (0 = no disturbing springs); crossed, whether the
     crossed springs are in the model.
-    Returns `Springs`.  Raises `BolusError` on NaN/inf vertices, bad indices and zero-area
-    triangles (naming the first): they have no rest shape.  Needle triangles are fine
-    (their springs are short and stiff but finite).
+    Returns `Springs`.  Raises `BolusError` (`topology.check_mesh`, naming the first) on
+    no triangles, NaN/inf vertices, bad indices, zero-area triangles (no rest shape) and
+    non-manifold edges (no pair of faces for a crossed spring).  Needle triangles are
+    fine (their springs are short and stiff but finite).
     """
-    if topo.m == 0:  # (MeshTopology has checked the arrays: shapes, NaN/inf, indices)
-        raise BolusError("the patch has no triangles to build springs on")
-    topo.require_nondegenerate("the patch")
+    check_mesh(topo.V, topo.F, "the patch", manifold=True)
+    return _build_springs(topo, contour_window, crossed)
+
+
+def _build_springs(topo: MeshTopology, contour_window: int, crossed: bool) -> Springs:
+    """`build_springs` without the input check (for callers that checked the patch already)."""
     E, rest_t = topo.edges, topo.edge_lengths
     ends, rest = [E], [rest_t]
     if crossed:

@@ -32,8 +32,8 @@ import numpy as np
 from .assemble import Pattern, assemble_pattern
 from .cutting import cut_to_disk
 from .errors import BolusError
-from .initial_unfolding import conformal_unfolding, initial_unfolding
-from .measures import _ratios, curvature_sums, length_area_errors, polygon_area_error, polygon_errors, triangle_errors
+from .initial_unfolding import _conformal, _greedy, conformal_unfolding, initial_unfolding
+from .measures import _curvature_sums, _ratios, curvature_sums, length_area_errors, polygon_area_error, polygon_errors, triangle_errors
 from .overlap import boundary_self_intersections, overlapping_faces, signed_areas
 from .overlap_correction import (
     FLIP_WEIGHT,
@@ -49,7 +49,7 @@ from .overlap_correction import (
 from .refine import refine_lengths_l1
 from .relax import STOP_EVERY, relax_explicit, relax_lbfgs
 from .saliency import lumped_mass
-from .springs import CONTOUR_WINDOW, Springs, area_terms, build_springs, spring_energy, stiffness_laplacian
+from .springs import CONTOUR_WINDOW, Springs, _build_springs, area_terms, build_springs, spring_energy, stiffness_laplacian
 from .topology import MeshTopology, check_mesh, submesh
 
 __all__ = [
@@ -165,8 +165,8 @@ class _Run:
 
 
 def _check_patch(V, F, method: str, start: str) -> tuple[np.ndarray, np.ndarray, MeshTopology]:
-    """The input checks of `unfold_patch`; returns (V, F, topology)."""
-    V, F = check_mesh(V, F, "the patch", nondegenerate=False)
+    """The input checks of `unfold_patch` (messages in the caller's indices); returns (V, F, topology)."""
+    V, F = check_mesh(V, F, "the patch", nondegenerate=False, min_faces=0)
     if len(F) < MIN_TRIANGLES:
         raise BolusError(f"a patch of {len(F)} triangles is too small to unfold (at least {MIN_TRIANGLES} "
                          "are needed)")
@@ -177,7 +177,7 @@ def _check_patch(V, F, method: str, start: str) -> tuple[np.ndarray, np.ndarray,
     topo = MeshTopology(V, F)
     if float(topo.areas.sum()) <= 0 or topo.degenerate_faces().all():
         raise BolusError("the patch has no area to unfold")
-    topo.require_nondegenerate("the patch")
+    check_mesh(V, F, "the patch", manifold=True)  # zero-area triangles, non-manifold edges: named
     # consistent winding: every interior edge is walked once in each direction
     he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
     if len(np.unique(he[:, 0] * topo.n + he[:, 1])) < len(he):
@@ -199,12 +199,12 @@ def _start(run: _Run, start: str) -> np.ndarray:
     """The starting UV (n,2): conformal map, or 4.5.1 with the conformal map if that folds over."""
     topo = run.topo
     if start != "greedy":
-        return _ccw(conformal_unfolding(topo), topo.F)
-    UV = initial_unfolding(topo, springs=run.springs)
+        return _ccw(_conformal(topo), topo.F)
+    UV = _greedy(topo, springs=run.springs)
     if run.flipped(UV):
         # the coordinate transformation of 4.5.1 folded over (a strongly curved patch):
         # start from the least-squares conformal map, which does not fold on a disk
-        UV = conformal_unfolding(topo)
+        UV = _conformal(topo)
         run.warnings.append("started from a conformal map: the coordinate transformation of 4.5.1 folded over")
     return _ccw(UV, topo.F)
 
@@ -347,11 +347,13 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     Returns
     -------
     `Unfolding`: UV (n2,2) counter-clockwise; flipped triangles are corrected (4.5.3) and
-    any that remain, and any overlap of the outline, are counted and reported.
+    any that remain, and any overlap of the outline, are counted and reported.  Vertices
+    in no triangle are left out (vert_origin names the input vertex of every UV row).
 
-    Raises `BolusError` naming the problem for bad arrays, NaN/inf, fewer than 3 or
-    zero-area triangles (coincident or collinear vertices), inconsistent winding, an
-    unknown method or start, and patches `cut_to_disk` cannot handle (non-manifold edges).
+    Raises `BolusError` naming the problem and where for bad arrays, NaN/inf, fewer than
+    3 triangles, zero-area triangles (coincident or collinear vertices), non-manifold
+    edges, inconsistent winding, an unknown method or start.  Needle triangles (tiny
+    angles, positive area) are unfolded like any other.
 
     Budgets (issue 9; the stages of the seed are kept, their budgets are ours): the
     relaxation stops at `RELAX_ITERS` iterations or a relative energy decrease below
@@ -366,10 +368,12 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     st = _Stages(progress)
     V, F, topo0 = _check_patch(V, F, method, start)
     st.stage(0.0, 0.1, "initial unfolding")
-    deficit, excess = curvature_sums(topo0)
-    cut = cut_to_disk(V, F)
+    deficit, excess = _curvature_sums(topo0)
+    F, used = submesh(F, np.ones(len(F), dtype=bool))  # vertices in no triangle are left out
+    cut = cut_to_disk(V[used], F)
     topo = MeshTopology(cut.V, cut.F)
-    springs = build_springs(topo, contour_window=CONTOUR_WINDOW if disturbing_springs else 0, crossed=crossed_springs)
+    # (the patch is checked: _check_patch; the cut keeps its triangles)
+    springs = _build_springs(topo, CONTOUR_WINDOW if disturbing_springs else 0, crossed_springs)
     run = _Run(topo, springs, st)
     UV = _start(run, start)
     st.stage(0.1, 0.35, "relaxing springs")
@@ -386,10 +390,10 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         UV, flipped = _outline_stage(run, UV, flipped, refine_rounds if relax else 0)
     if flipped:  # last resort, no relaxation after it: smooth the few folds left away locally
         UV, flipped = untangle(UV, topo)
-    return _finish(run, UV, flipped, cut, method, t0, hopeless, deficit, excess, reason)
+    return _finish(run, UV, flipped, cut, used, method, t0, hopeless, deficit, excess, reason)
 
 
-def _finish(run: _Run, UV, flipped, cut, method, t0, hopeless, deficit, excess, reason) -> Unfolding:
+def _finish(run: _Run, UV, flipped, cut, used, method, t0, hopeless, deficit, excess, reason) -> Unfolding:
     """The `Unfolding` with its measures and warnings."""
     topo = run.topo
     e, _ = spring_energy(UV.ravel(), run.springs, topo.n)
@@ -401,7 +405,7 @@ def _finish(run: _Run, UV, flipped, cut, method, t0, hopeless, deficit, excess, 
         run.warnings.append(f"the pattern overlaps itself ({overlaps} triangles)")
     EL, EA = run.errors(UV)
     run.st.stage(1.0, 1.0, "done")
-    return Unfolding(UV, topo.F, cut.vert_origin, EL, EA, flipped, overlaps, run.it, float(e),
+    return Unfolding(UV, topo.F, used[cut.vert_origin], EL, EA, flipped, overlaps, run.it, float(e),
                      time.perf_counter() - t0, method, cut.description if cut.was_cut else "", run.warnings,
                      hopeless, deficit, excess, reason)
 
