@@ -169,15 +169,16 @@ def test_line_kept_for_zigzag_and_parabola_for_a_bend():
     zig = 0.5 * (-1.0) ** np.arange(40)  # mesh zig-zag around a straight line
     _, order, _ = fit_open_curve(x, 2.0 + 0.1 * x + zig, noise=2.5)
     assert order == 1
-    _, order, rms = fit_open_curve(x, 0.01 * (x - 50) ** 2 + zig, noise=2.5)
-    assert order == 2 and rms < 0.6
+    coef, order, rms = fit_open_curve(x, 0.01 * (x - 50) ** 2 + zig, noise=2.5)
+    assert order == 2 and rms == pytest.approx(0.4995, rel=0.15)  # the zig-zag's own RMS is 0.5
+    np.testing.assert_allclose(coef, [0.01, -1.0, 25.0], rtol=2e-3)
 
 
 def test_closed_fit_of_a_circle_is_an_ellipse():
     s = np.linspace(0, 2 * np.pi, 60, endpoint=False)
     xy = np.stack([30 * np.cos(s) + 0.3 * np.cos(7 * s), 20 * np.sin(s)], 1)
     coef, K, rms = fit_closed_curve(xy, noise=3.0)
-    assert K == 1 and rms < 0.5
+    assert K == 1 and rms == pytest.approx(0.144, rel=0.15)  # measured (the 7th harmonic of 0.3 mm)
 
 
 def test_turning_of_a_staircase_and_a_line():
@@ -211,7 +212,7 @@ def test_jagged_straight_border_becomes_a_line():
     assert np.abs(np.c_[Q[:, 1], np.ones(len(Q))] @ coef - Q[:, 0]).max() <= 0.05 * h * np.sqrt(2) + 1e-9
     t0 = turning_per_mm(V, border_edges(F, labels, 0, 1))[0]
     t1 = turning_per_mm(res.V, E)[0]
-    assert t1 < 0.1 * t0
+    assert t1 / t0 == pytest.approx(0.0067, rel=0.15)  # measured; the ends keep a little turning
     assert rep.turning_after == pytest.approx(t1)
 
 
@@ -231,7 +232,7 @@ def test_curved_border_becomes_a_parabola():
     q = conic_through(x, y)
     A, B, C = q[0], q[1], q[2]
     assert abs(B * B - 4 * A * C) < 1e-6 * (A * A + B * B + C * C)
-    assert rep.turning_after < 0.3 * rep.turning_before
+    assert rep.turning_after / rep.turning_before == pytest.approx(0.0528, rel=0.15)  # measured
 
 
 def test_enclosed_patch_gets_an_ellipse():
@@ -247,7 +248,7 @@ def test_enclosed_patch_gets_an_ellipse():
     x, y = res.V[new, 0], res.V[new, 1]
     q = conic_through(x, y)
     assert q[1] ** 2 - 4 * q[0] * q[2] < 0  # an ellipse
-    assert rep.turning_after < 0.3 * rep.turning_before
+    assert rep.turning_after / rep.turning_before == pytest.approx(0.152, rel=0.15)  # measured
 
 
 def test_ring_around_a_tube_is_cut_by_a_plane():
@@ -264,6 +265,7 @@ def test_ring_around_a_tube_is_cut_by_a_plane():
     P = res.V[new]
     _, sv, _ = np.linalg.svd(P - P.mean(0))
     assert sv[2] < 1e-9 * sv[0]
+    assert rep.turning_after / rep.turning_before == pytest.approx(0.0249, rel=0.15)  # measured
 
 
 def test_dome_loop_on_a_curved_surface():
@@ -272,8 +274,9 @@ def test_dome_loop_on_a_curved_surface():
     labels = (np.linalg.norm(c[:, :2] - [10, 5], axis=1) < 20).astype(int)
     res = smooth_cuts(V, F, labels)
     check_invariants(V, F, labels, res)
-    assert res.borders[0].closed
-    assert res.borders[0].turning_after < 0.3 * res.borders[0].turning_before
+    (rep,) = res.borders
+    assert rep.closed and rep.method == "ellipse"
+    assert rep.turning_after / rep.turning_before == pytest.approx(0.191, rel=0.15)  # measured
 
 
 def test_three_patches_cuts_stay_in_their_pair():
@@ -283,14 +286,31 @@ def test_three_patches_cuts_stay_in_their_pair():
     res = smooth_cuts(V, F, labels)
     check_invariants(V, F, labels, res)
     assert {(r.a, r.b) for r in res.borders} == {(0, 1), (0, 2), (1, 2)}
+    measured = {(0, 1): 0.196, (0, 2): 0.0597, (1, 2): 0.0209}  # turning after / before
     for r in res.borders:
-        assert r.method != "unchanged"
-        assert r.turning_after < 0.3 * r.turning_before
-    # a cut between a and b never splits or relabels a face of the third patch: faces that
-    # end up in patch p came from faces of p or of a patch it shares a border with, and
-    # every face that kept its triangle kept its label unless it lies next to the border
+        assert r.method == "line"
+        assert r.turning_after / r.turning_before == pytest.approx(measured[(r.a, r.b)], rel=0.15)
+    # faces that changed patch: only those next to the borders (measured: 165 of 2038)
     moved = res.labels != labels[res.face_parent]
-    assert moved.sum() < 0.1 * len(res.F)
+    assert moved.sum() == pytest.approx(165, rel=0.15)
+
+
+def test_a_third_patch_is_never_touched():
+    """A jagged 0|1 border ending on patch 2, whose borders are already smooth (along mesh
+    edges): patch 2 keeps exactly its faces and vertices (none split, none relabelled)."""
+    V, F = grid(30, 30, size=100.0)
+    c = centroids(V, F)
+    labels = np.where(c[:, 0] > 70, 2, (c[:, 1] > 50 + 0.3 * (c[:, 0] - 35)).astype(int))
+    res = smooth_cuts(V, F, labels)
+    check_invariants(V, F, labels, res)
+    rows = {(r.a, r.b): r for r in res.borders}
+    assert rows[(0, 1)].method == "line"
+    assert rows[(0, 2)].method == rows[(1, 2)].method == "unchanged"
+    two = res.labels == 2
+    np.testing.assert_array_equal(np.sort(res.face_parent[two]), np.nonzero(labels == 2)[0])
+    assert res.face_unchanged[two].all()
+    np.testing.assert_array_equal(res.F[two], F[res.face_parent[two]])  # same corners, same order
+    np.testing.assert_array_equal(res.V[np.unique(res.F[two])], V[np.unique(F[labels == 2])])
 
 
 @pytest.mark.parametrize("slope", [0.2, 0.37, 0.61])
@@ -472,3 +492,6 @@ def test_second_run_changes_nothing_on_a_segmented_real_face():
     first, _ = assert_second_run_changes_nothing(V, F, seg.face_labels)
     for r in first.borders:
         assert r.turning_after < r.turning_before, r
+    tb = sum(r.turning_before * r.length_before_mm for r in first.borders)
+    ta = sum(r.turning_after * r.length_after_mm for r in first.borders)
+    assert ta / tb == pytest.approx(0.0255, rel=0.15)  # measured: the length-weighted turning 97.5 % lower

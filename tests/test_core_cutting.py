@@ -265,7 +265,8 @@ def test_closed_sphere_is_cut_between_far_vertices():
     assert_valid_cut(V, F, res, 1)
     p = res.cut_paths[0]
     assert len(p) >= 3
-    assert np.linalg.norm(V[p[0]] - V[p[-1]]) > 90.0  # nearly antipodal on a 50 mm sphere
+    assert np.linalg.norm(V[p[0]] - V[p[-1]]) == pytest.approx(100.0)  # antipodal vertices of a 50 mm sphere
+    assert res.cut_length_mm == pytest.approx(165.5, rel=0.15)  # measured; the half great circle is 157.1 mm
     assert len(res.V) == len(V) + len(p) - 2  # inner path vertices are doubled
     assert "closed" in res.description
 

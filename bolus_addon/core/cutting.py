@@ -26,7 +26,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from .errors import BolusError
-from .topology import MeshTopology, as_mesh_arrays
+from .topology import MeshTopology, check_mesh
 
 __all__ = [
     "CutResult",
@@ -94,9 +94,10 @@ def _edge_ids(topo: MeshTopology, pairs) -> np.ndarray:
 def _wedge_ends_of_boundary(topo: MeshTopology):
     """Boundary edges (b,), their half-edge tail/head vertices and the wedge at each end."""
     if topo.nonmanifold_edges.any():
+        i, j = (int(x) for x in topo.edges[np.argmax(topo.nonmanifold_edges)])
         raise BolusError(
-            f"the mesh has {int(topo.nonmanifold_edges.sum())} edges shared by more than two faces; "
-            "clean them up first (Select > Select All by Trait > Non Manifold)"
+            f"the mesh has {int(topo.nonmanifold_edges.sum())} edges shared by more than two faces (e.g. between "
+            f"vertices {i} and {j}); clean them up first (Select > Select All by Trait > Non Manifold)"
         )
     F = topo.F
     b = np.nonzero(topo.boundary_edges)[0]
@@ -111,12 +112,26 @@ def _wedge_ends_of_boundary(topo: MeshTopology):
 def boundary_loops(F, topo: MeshTopology | None = None) -> list[np.ndarray]:
     """Ordered vertex loops of the boundary, longest (most vertices) first.
 
-    F (m,3).  Each loop is an int64 array [v0, v1, ...] (closing edge v_last -> v0)
-    running along the half-edges of its triangles, so on a counter-clockwise disk the
-    outer loop is counter-clockwise and holes are clockwise.  Consecutive boundary
-    edges are chained through the fan (wedge) of corners at their shared vertex, so a
-    vertex where two loops touch is handled; the direction of a loop on a badly oriented
-    mesh follows its lowest-numbered edge.  Non-manifold edges raise `BolusError`.
+    The one boundary walker of the core: every module that follows a boundary calls it.
+
+    Parameters
+    ----------
+    F : (m,3) int triangles (vertex positions are not needed).
+    topo : optional `MeshTopology` of the same triangles, to reuse its cached edges.
+
+    Returns
+    -------
+    list of (k_i,) int64 arrays [v0, v1, ...], one per loop, the closing edge
+    v_last -> v0 implied; [] for a closed surface (or no triangles).  Each loop runs along
+    the half-edges of its triangles, so on a counter-clockwise disk the outer loop is
+    counter-clockwise and holes are clockwise.  Consecutive boundary edges are chained
+    through the fan (wedge) of corners at their shared vertex, so a vertex where two
+    loops touch (or one loop touches itself) is passed once per wedge; the direction of a
+    loop on a badly oriented mesh follows its lowest-numbered edge.  Purely topological:
+    zero-area triangles do not matter.
+
+    Raises `BolusError` for bad indices or triangles that repeat a vertex (naming the
+    triangle) and for non-manifold edges (naming one).
     """
     if topo is None:
         topo = _topology_of_faces(F)
@@ -189,7 +204,9 @@ def _orientation_info(topo: MeshTopology) -> tuple[bool, bool]:
 def surface_type(V, F) -> dict:
     """Topology of a patch: is it a disk that can be unfolded as it is?
 
-    V (n,3), F (m,3).  Returns a dict:
+    V (n,3), F (m,3); purely topological (zero-area triangles count like any other;
+    NaN/inf coordinates or bad indices raise `BolusError` naming the vertex or triangle).
+    Returns a dict:
       vertices, edges, faces          counts (vertices referenced by a face only)
       euler_characteristic            V - E + F
       boundary_loops                  number of loops (None with non-manifold edges)
@@ -310,31 +327,52 @@ def _path_length(V, path) -> float:
 def cut_to_disk(V, F) -> CutResult:
     """Cut a patch to a topological disk along short edge paths (issue 3).
 
-    V (n,3) mm, F (m,3).  A disk comes back unchanged (no cut).  Other loops are
-    joined to the outer (longest) loop by shortest interior paths; a closed genus-0
-    surface is cut between two far-apart vertices.  The result is checked to be one
-    component with one boundary loop and Euler characteristic 1.
-    Raises `BolusError` for several parts, handles (genus > 0), non-manifold edges or a
+    Parameters
+    ----------
+    V : (n,3) mm.  F : (m,3) triangles of one patch.
+
+    Returns
+    -------
+    `CutResult`: V (n2,3), F (m,3) in the input's face order, vert_origin (n2,), the cut
+    paths (input vertex ids), their length and a description.  A disk comes back
+    unchanged (no cut).  Other loops are joined to the outer (longest) loop by shortest
+    interior paths; a closed genus-0 surface is cut between two far-apart vertices.  The
+    result is checked to be one component with one boundary loop and Euler
+    characteristic 1.  Zero-area triangles are fine here (the cut is topological; edge
+    lengths only rank the paths).
+
+    Raises `BolusError` for NaN/inf coordinates or bad indices (naming the vertex or
+    triangle), several parts, handles (genus > 0), non-manifold edges or a
     non-orientable patch, with what to do about it.
     """
-    V, F = as_mesh_arrays(V, F)
-    if len(F) == 0:
-        raise BolusError("the patch has no faces")
+    V, F = check_mesh(V, F, "the patch", nondegenerate=False, min_faces=1)
     topo = MeshTopology(V, F)
     if topo.nonmanifold_edges.any():
+        i, j = (int(x) for x in topo.edges[np.argmax(topo.nonmanifold_edges)])
         raise BolusError(
-            f"the patch has {int(topo.nonmanifold_edges.sum())} edges shared by more than two faces and cannot be "
-            "flattened; clean them up first (Select > Select All by Trait > Non Manifold)"
+            f"the patch has {int(topo.nonmanifold_edges.sum())} edges shared by more than two faces (e.g. between "
+            f"vertices {i} and {j}) and cannot be flattened; clean them up first "
+            "(Select > Select All by Trait > Non Manifold)"
         )
+    cut = _Cutter(V, F, np.arange(len(V), dtype=np.int64))
     notes = []
-    origin = np.arange(len(V), dtype=np.int64)
-    Fc = F
     pinched = np.nonzero(topo.vertex_fan_count > 1)[0]
     if len(pinched):
-        Fc, origin = split_along_edges(F, np.zeros((0, 2), dtype=np.int64), topo)
+        cut.F, cut.origin = split_along_edges(F, np.zeros((0, 2), dtype=np.int64), topo)
         notes.append(f"split {len(pinched)} pinched vertex(es) (e.g. vertex {int(pinched[0])})")
-    Vc = V[origin]
-    st = surface_type(Vc, Fc)
+    st = surface_type(cut.Vc, cut.F)
+    _require_cuttable(st)
+    if st["boundary_loops"] == 0:
+        cut.open_closed_surface()
+    cut.join_loops()
+    if not surface_type(cut.Vc, cut.F)["is_disk"]:
+        raise BolusError("internal error: cutting the patch did not give a disk; please report this mesh")
+    return CutResult(V=cut.Vc, F=cut.F, vert_origin=cut.origin, cut_paths=cut.paths,
+                     cut_length_mm=float(sum(cut.lengths)), description=cut.description(notes))
+
+
+def _require_cuttable(st: dict) -> None:
+    """BolusError for what no short cut opens to a disk: several parts, non-orientable, handles."""
     if st["components"] > 1:
         raise BolusError(
             f"the patch has {st['components']} separate parts; unfold each part on its own "
@@ -351,21 +389,37 @@ def cut_to_disk(V, F) -> CutResult:
             "cannot be opened to a disk by a short cut; segment it into more patches"
         )
 
-    paths_in, lengths, parts = [], [], []
 
-    def cut_along(path, t, text):
+@dataclass
+class _Cutter:
+    """The patch being cut: input V (n,3), current faces F (m,3) and vertex origins (n2,)."""
+
+    V: np.ndarray
+    F: np.ndarray
+    origin: np.ndarray
+    paths: list = field(default_factory=list)  #: cut paths in input vertex ids
+    lengths: list = field(default_factory=list)
+    parts: list = field(default_factory=list)  #: one description per cut
+
+    @property
+    def Vc(self) -> np.ndarray:
+        return self.V[self.origin]
+
+    def cut_along(self, path: np.ndarray, t: MeshTopology, text: str) -> None:
         """Open the current mesh along ``path`` (its vertex ids); record it in input ids."""
-        Fn, vo = split_along_edges(Fc, np.stack([path[:-1], path[1:]], 1), t)
-        p_in = origin[path]  # the first copies keep their ids, so path means the same before and after
-        paths_in.append(p_in)
-        lengths.append(_path_length(V, p_in))
-        parts.append(text.format(lengths[-1], int(p_in[0]), int(p_in[-1])))
-        return Fn, origin[vo]
-    if st["boundary_loops"] == 0:
-        # closed genus-0 surface: a double sweep finds two vertices far apart
-        t = MeshTopology(Vc, Fc)
+        Fn, vo = split_along_edges(self.F, np.stack([path[:-1], path[1:]], 1), t)
+        p_in = self.origin[path]  # the first copies keep their ids, so path means the same before and after
+        self.paths.append(p_in)
+        self.lengths.append(_path_length(self.V, p_in))
+        self.parts.append(text.format(self.lengths[-1], int(p_in[0]), int(p_in[-1])))
+        self.F, self.origin = Fn, self.origin[vo]
+
+    def open_closed_surface(self) -> None:
+        """A closed genus-0 surface: one cut between two far-apart vertices (a double Dijkstra sweep)."""
+        Vc = self.Vc
+        t = MeshTopology(Vc, self.F)
         G = _edge_graph(Vc, t, np.ones(len(t.edges), dtype=bool))
-        d0 = dijkstra(G, indices=int(Fc[0, 0]))
+        d0 = dijkstra(G, indices=int(self.F[0, 0]))
         a = int(np.argmax(np.where(np.isfinite(d0), d0, -1)))
         da, pred = dijkstra(G, indices=a, return_predecessors=True)
         b = int(np.argmax(np.where(np.isfinite(da), da, -1)))
@@ -373,37 +427,33 @@ def cut_to_disk(V, F) -> CutResult:
         if len(path) < 3:  # at least two edges, or the cut would not open anything
             nb = t.one_ring_vertices(int(path[-1]))
             path = np.r_[path, nb[nb != path[0]][0]]
-        Fc, origin = cut_along(path, t, "the surface is closed: cut along a {:.1f} mm path between vertices {} and {}")
-        Vc = V[origin]
+        self.cut_along(path, t, "the surface is closed: cut along a {:.1f} mm path between vertices {} and {}")
 
-    while True:
-        t = MeshTopology(Vc, Fc)
-        loops = boundary_loops(Fc, t)
-        if len(loops) <= 1:
-            break
-        outer = int(np.argmax([loop_length(Vc, lp) for lp in loops]))
-        G = _edge_graph(Vc, t, ~t.boundary_edges)
-        dist, pred, _ = dijkstra(G, indices=loops[outer], min_only=True, return_predecessors=True)
-        others = np.concatenate([lp for i, lp in enumerate(loops) if i != outer])
-        d = dist[others]
-        if not np.isfinite(d).any():
-            raise BolusError("could not find a path inside the patch joining its boundary loops; "
-                             "segment it into more patches")
-        target = int(others[np.argmin(d)])
-        path = _path_from(pred, target)  # inner loop vertex ... outer loop vertex
-        Fc, origin = cut_along(path, t, "cut along a {:.1f} mm path joining the boundary loops at vertices {} and {}")
-        Vc = V[origin]
+    def join_loops(self) -> None:
+        """Join every other boundary loop to the outer (longest) one, nearest first, by shortest interior paths."""
+        while True:
+            Vc = self.Vc
+            t = MeshTopology(Vc, self.F)
+            loops = boundary_loops(self.F, t)
+            if len(loops) <= 1:
+                return
+            outer = int(np.argmax([loop_length(Vc, lp) for lp in loops]))
+            G = _edge_graph(Vc, t, ~t.boundary_edges)
+            dist, pred, _ = dijkstra(G, indices=loops[outer], min_only=True, return_predecessors=True)
+            others = np.concatenate([lp for i, lp in enumerate(loops) if i != outer])
+            d = dist[others]
+            if not np.isfinite(d).any():
+                raise BolusError("could not find a path inside the patch joining its boundary loops; "
+                                 "segment it into more patches")
+            path = _path_from(pred, int(others[np.argmin(d)]))  # inner loop vertex ... outer loop vertex
+            self.cut_along(path, t, "cut along a {:.1f} mm path joining the boundary loops at vertices {} and {}")
 
-    check = surface_type(Vc, Fc)
-    if not check["is_disk"]:
-        raise BolusError("internal error: cutting the patch did not give a disk; please report this mesh")
-    if parts:
-        total = float(sum(lengths))
-        each = "; ".join(p.removeprefix("cut along ") for p in parts)
-        desc = parts[0] if len(parts) == 1 else f"cut along {len(parts)} paths ({total:.1f} mm in all): {each}"
-    else:
-        desc = "already a disk: no cut needed"
-    if notes:
-        desc = "; ".join(notes + [desc])
-    return CutResult(V=Vc, F=Fc, vert_origin=origin, cut_paths=paths_in, cut_length_mm=float(sum(lengths)),
-                     description=desc)
+    def description(self, notes: list[str]) -> str:
+        """The user report: the cuts made (or that none was needed), after any notes."""
+        if self.parts:
+            each = "; ".join(p.removeprefix("cut along ") for p in self.parts)
+            desc = (self.parts[0] if len(self.parts) == 1
+                    else f"cut along {len(self.parts)} paths ({float(sum(self.lengths)):.1f} mm in all): {each}")
+        else:
+            desc = "already a disk: no cut needed"
+        return "; ".join(notes + [desc]) if notes else desc
