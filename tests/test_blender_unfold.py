@@ -352,6 +352,7 @@ def test_flat_patch_unfolds_isometrically(bpy_addon, scene):
 
 # =========================================================================== 3. cap
 def test_sixty_degree_cap_has_no_flipped_triangles(bpy_addon, scene):
+    """Also: the reported EL / EA are SPEC's measure of `<name>_pattern` (its float32 positions) to 1e-9."""
     bpy = bpy_addon
     V, F = spherical_cap(100.0, 60.0, 4)
     src = make_object(bpy, V, F, name="cap", scale_length=0.001)
@@ -359,6 +360,7 @@ def test_sixty_degree_cap_has_no_flipped_triangles(bpy_addon, scene):
     pat = pattern_of(bpy, src)
     check_pattern_basics(bpy, src, pat)
     m = spec_measure(bpy, src, pat)
+    check_reported_errors(pat, m, tol=1e-9)
     assert m["flipped"] == 0 and (m["A"] > 0).all(), f"{m['flipped']} flipped triangles"
     # one simple outline around triangles that all turn the same way: an embedding
     loops = boundary_loops(bpy, pat)
@@ -488,16 +490,6 @@ def test_segmented_mesh_islands_do_not_overlap(bpy_addon, scene, gap_mm):
     # the reported numbers are SPEC's measure of this very object (its float32 positions,
     # not the float64 layout they were rounded from), per patch and in total
     check_reported_errors(pat, m, tol=1e-9)
-
-
-def test_reported_errors_are_those_of_the_stored_pattern(bpy_addon, scene):
-    """A curved cap in mm: the reported EL / EA are SPEC's measure of `<name>_pattern` to 1e-9."""
-    bpy = bpy_addon
-    V, F = spherical_cap(100.0, 60.0, 4)
-    src = make_object(bpy, V, F, name="cap", scale_length=0.001)
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
-    pat = pattern_of(bpy, src)
-    check_reported_errors(pat, spec_measure(bpy, src, pat), tol=1e-9)
 
 
 # =========================================================================== 6. SVG export
