@@ -108,6 +108,35 @@ def mesh_snapshot(mesh):
     return co, loops, seams, sorted(a.name for a in mesh.attributes)
 
 
+def object_snapshot(ob):
+    """Everything an operator must not change on an object it was not asked to change:
+    `mesh_snapshot`, the values of every user FLOAT / INT / BOOLEAN attribute, the custom
+    properties, the object's matrix and the number of colour attributes."""
+    me = ob.data
+    attrs = {}
+    for a in me.attributes:
+        if a.data_type in ("FLOAT", "INT", "BOOLEAN") and not a.name.startswith("."):
+            attrs[a.name] = attr_array(me, a.name, np.float64 if a.data_type == "FLOAT" else np.int64)
+    props = {k: (ob[k] if not hasattr(ob[k], "to_dict") else ob[k].to_dict()) for k in ob.keys()}
+    return mesh_snapshot(me), attrs, props, np.array(ob.matrix_world), len(me.color_attributes)
+
+
+def assert_same_object(before, after) -> None:
+    """Two `object_snapshot`s are identical (bit for bit)."""
+    (co0, l0, s0, n0), a0, p0, M0, c0 = before
+    (co1, l1, s1, n1), a1, p1, M1, c1 = after
+    np.testing.assert_array_equal(co0, co1)
+    np.testing.assert_array_equal(l0, l1)
+    np.testing.assert_array_equal(s0, s1)
+    assert n0 == n1
+    assert a0.keys() == a1.keys()
+    for k in a0:
+        np.testing.assert_array_equal(a0[k], a1[k], err_msg=k)
+    assert p0 == p1
+    np.testing.assert_array_equal(M0, M1)
+    assert c0 == c1
+
+
 def enter_edit_mode_with_faces(bpy, ob, mask: np.ndarray) -> None:
     """Select the polygons in `mask` (and their vertices) in Object Mode, then enter Edit Mode.
 
@@ -165,17 +194,24 @@ def loop_triangles(me) -> tuple[np.ndarray, np.ndarray]:
     return tv.reshape(-1, 3), tp
 
 
-def assert_labels_connected(me, labels, what: str = "patch") -> None:
-    """Each label's polygons are one piece through shared edges (scipy connected_components)."""
+def label_components(me, labels) -> np.ndarray:
+    """(p,) component of every polygon through shared edges between polygons of the same
+    label (scipy connected_components, independent of the add-on's code)."""
     import scipy.sparse as sp
     from scipy.sparse.csgraph import connected_components
 
+    labels = np.asarray(labels)
     le, lp = loop_edges_polys(me)
     order = np.argsort(le, kind="stable")
     le, lp = le[order], lp[order]
     same = (le[1:] == le[:-1]) & (labels[lp[1:]] == labels[lp[:-1]])
     a, b = lp[:-1][same], lp[1:][same]
     n = len(me.polygons)
-    _, comp = connected_components(sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n)), directed=False)
+    return connected_components(sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n)), directed=False)[1]
+
+
+def assert_labels_connected(me, labels, what: str = "patch") -> None:
+    """Each label's polygons are one piece through shared edges."""
+    comp = label_components(me, labels)
     for p in np.unique(labels):
         assert len(np.unique(comp[labels == p])) == 1, f"{what} {p} is not edge-connected"

@@ -16,6 +16,7 @@ import pytest
 from conftest import (
     ASSETS,
     attr_array,
+    label_components,
     loop_triangles,
     edge_verts,
     loop_edges_polys,
@@ -88,25 +89,6 @@ def boundary_vertices(me) -> np.ndarray:
     b = np.zeros(len(me.vertices), dtype=bool)
     b[edge_verts(me)[count == 1].ravel()] = True
     return b
-
-
-def components(me, labels: np.ndarray) -> np.ndarray:
-    """Union-find over polygons sharing a mesh edge and carrying the same label."""
-    parent = np.arange(len(me.polygons))
-
-    def find(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    le, lp = loop_edges_polys(me)
-    first_poly = {}
-    for e, p in zip(le.tolist(), lp.tolist()):
-        q = first_poly.setdefault(e, p)
-        if q != p and labels[p] == labels[q]:
-            parent[find(p)] = find(q)
-    return np.array([find(i) for i in range(len(parent))])
 
 
 def expected_seams(me, labels: np.ndarray) -> np.ndarray:
@@ -383,7 +365,7 @@ def check_segmentation(bpy, ob):
     lab = attr_array(me, "bolus_patch", np.int64)
     n = int(lab.max()) + 1
     assert lab.min() == 0 and set(np.unique(lab).tolist()) == set(range(n))
-    comp = components(me, lab)
+    comp = label_components(me, lab)
     for p in range(n):
         assert len(np.unique(comp[lab == p])) == 1, f"patch {p} is not edge-connected"
     np.testing.assert_array_equal(seams(me), expected_seams(me, lab))
@@ -506,7 +488,7 @@ def test_edit_mode_selection_is_the_region(bpy_addon, scene, capfd):
     assert np.all(lab[~region] == -1) and np.all(lab[region] >= 0)
     n = int(lab.max()) + 1
     assert n >= 2 and set(np.unique(lab[region]).tolist()) == set(range(n))
-    comp = components(me, lab)
+    comp = label_components(me, lab)
     for p in range(n):
         assert len(np.unique(comp[lab == p])) == 1
     s = seams(me)
