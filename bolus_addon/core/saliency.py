@@ -113,9 +113,11 @@ def lumped_mass(V: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def smooth_for_analysis(topo: MeshTopology, smoothing_mm: float) -> np.ndarray:
-    """Smoothed copy of the vertices (n,3) at scale ``smoothing_mm`` (see module doc).
+    """Smoothed copy of the vertices at scale ``smoothing_mm`` (see module doc).
 
-    The input arrays are not modified.  ``smoothing_mm == 0`` returns a copy of V.
+    Parameters: topo the mesh's `MeshTopology` (V (n,3) mm, F (m,3)); smoothing_mm >= 0.
+    Returns Vs (n,3): boundary and non-manifold vertices stay where they are.  The input
+    arrays are not modified; ``smoothing_mm == 0`` returns a copy of V.
     """
     if not np.isfinite(smoothing_mm) or smoothing_mm < 0:
         raise BolusError(f"the smoothing scale must be 0 or a positive number of mm, got {smoothing_mm}")
@@ -166,8 +168,19 @@ class SaliencyResult:
 def analyse(V, F, smoothing_mm: float = 0.0, topo: MeshTopology | None = None) -> SaliencyResult:
     """Flattenability and saliency of a triangle mesh (eqs. 4-1..4-4).
 
-    V (n,3) in mm, F (m,3).  With ``smoothing_mm > 0`` the angle sums are measured on
-    `smooth_for_analysis` of the mesh; the returned arrays still index V's vertices.
+    Parameters
+    ----------
+    V : (n,3) float, millimetres; F : (m,3) int
+    smoothing_mm : scale of `smooth_for_analysis` (0 = the raw angle sums)
+    topo : the `MeshTopology` of (V, F) if the caller has it
+
+    Returns
+    -------
+    SaliencyResult: theta, varpi, saliency (n,) indexing V's vertices (0 off the
+    interior), sum_varpi (eq. 4-2), flv (eq. 4-3), V_analysis (n,3).
+
+    Raises `BolusError` for an empty mesh, zero-area triangles (named) and the array
+    errors of `topology.as_mesh_arrays`; non-manifold vertices count as boundary.
     """
     topo = MeshTopology(V, F) if topo is None else topo
     if topo.m == 0:
