@@ -16,6 +16,12 @@ exact tests are orientation predicates and the separating-axis theorem, with a
 tolerance of ``rel_tol`` times the mean edge length, so that touching (shared vertices,
 the two sides of a cut that closes up exactly) is not an overlap.
 UV (n,2) are pattern coordinates (mm), F (m,3) triangles, counter-clockwise = positive.
+
+Degenerate input: NaN/inf coordinates, out-of-range indices and triangles repeating a
+vertex raise `BolusError` naming the first (`as_pattern_arrays`); a collapsed (zero-area)
+triangle, e.g. between coincident vertices, counts as flipped and never as overlapping;
+needle triangles are ordinary ones; on a non-manifold edge, two triangles on the same
+side are a fold-over (an overlap) and the edge is not a boundary edge.
 """
 from __future__ import annotations
 
@@ -336,7 +342,11 @@ def point_in_polygon(points, polygon) -> np.ndarray:
 
 
 def overlap_summary(UV, F, loops=None) -> dict:
-    """Counts for a pattern report: flipped, overlapping faces, crossing boundary edges, ok."""
+    """Counts for a pattern report of UV (n,2), F (m,3) (loops: see `boundary_edge_array`).
+
+    Returns ``{"flipped_faces": int, "overlapping_faces": int, "boundary_crossings": int,
+    "ok": bool}``; ok when all three are 0.
+    """
     flipped = flipped_faces(UV, F)
     over = overlapping_faces(UV, F)
     cross = boundary_self_intersections(UV, F, loops)
