@@ -29,6 +29,8 @@ STALL_WINDOW = 5  # relax_lbfgs stops when the energy fell by less than tol * E 
 ENERGY_FLOOR = 1e-28  # an energy this small is the exact minimum (a developable patch)
 CURVATURE_TOL = 1e-16  # an (s, y) pair is kept only if s.y > this * |s|^2 (positive curvature)
 EXPLICIT_CHECK = 100  # relax_explicit tests its stop criterion every this many steps
+EXPLICIT_ENERGY_FLOOR = 1e-24  # relax_explicit stops at this energy (the step size limits it sooner than L-BFGS)
+STEP_BRACKET = (0.1, 0.5)  # a backtracking step shrinks to within this fraction of the last one
 
 
 def _start_positions(UV0, springs: Springs) -> np.ndarray:
@@ -125,10 +127,11 @@ def _line_search(fun, x, e, d, slope):
         en, gn = fun(xn)
         if en <= e + ARMIJO * t * slope:
             return xn, en, gn
-        # minimiser of the quadratic through e, slope and en, kept within [0.1 t, 0.5 t]
+        # minimiser of the quadratic through e, slope and en, kept within STEP_BRACKET x t
+        lo, hi = STEP_BRACKET
         denom = 2.0 * (en - e - slope * t)
-        t_q = -slope * t * t / denom if denom > 0 and np.isfinite(en) else 0.1 * t
-        t = min(max(t_q, 0.1 * t), 0.5 * t)
+        t_q = -slope * t * t / denom if denom > 0 and np.isfinite(en) else lo * t
+        t = min(max(t_q, lo * t), hi * t)
     return None
 
 
@@ -238,7 +241,7 @@ def relax_explicit(UV0, springs: Springs, masses: np.ndarray, max_iter: int = 20
             if progress is not None and time.perf_counter() >= t_report:
                 progress(it / max_iter)
                 t_report = time.perf_counter() + PROGRESS_EVERY
-            if abs(e_prev - e) <= tol * max(e, 1e-300) or e < 1e-24:
+            if abs(e_prev - e) <= tol * max(e, 1e-300) or e < EXPLICIT_ENERGY_FLOOR:
                 break
             e_prev = e
     e, _ = spring_energy(x, springs, n)

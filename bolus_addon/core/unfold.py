@@ -36,6 +36,7 @@ from .initial_unfolding import _conformal, _greedy, conformal_unfolding, initial
 from .measures import _curvature_sums, _ratios, curvature_sums, length_area_errors, polygon_area_error, polygon_errors, triangle_errors
 from .overlap import boundary_self_intersections, overlapping_faces, signed_areas
 from .overlap_correction import (
+    FLIP_ROUNDS,
     FLIP_WEIGHT,
     OUTLINE_ITERS,
     OUTLINE_ROUNDS,
@@ -89,6 +90,9 @@ HOPELESS_FAR = 2.0  # EL above HOPELESS_FAR * HOPELESS_EL after 50 iterations: s
 HOPELESS_STALL = 0.02  # or above HOPELESS_EL and less than 2 % (relative) better over 25 iterations
 OUTLINE_BIG = 10000  # triangles: larger patches get proportionally fewer outline rounds
 LOCAL_FIRST = True  # try `local_outline` before the whole-patch `correct_outline`
+# progress fraction range of every stage (by their typical share of the time)
+PROGRESS = {"start": (0.0, 0.1), "relax": (0.1, 0.35), "flips": (0.35, 0.45), "refine": (0.45, 0.6),
+            "local": (0.6, 0.7), "outline": (0.6, 0.95), "outline refine": (None, 0.98)}
 
 
 @dataclass
@@ -261,7 +265,7 @@ def _refine_stage(run: _Run, UV, flipped: int, rounds: int, far: bool) -> tuple[
     run.it += it
     flipped = run.flipped(UV)
     if flipped:
-        UV, it, flipped = correct_flips(UV, run.springs, topo, rounds=1 if far else 4)
+        UV, it, flipped = correct_flips(UV, run.springs, topo, rounds=1 if far else FLIP_ROUNDS)
         run.it += it
     return UV, flipped
 
@@ -278,14 +282,14 @@ def _hopeless(EL: float, EA: float, deficit: float, excess: float) -> tuple[bool
 def _whole_outline(run: _Run, UV, flipped: int, refine_rounds: int) -> tuple[np.ndarray, int]:
     """Whole-patch outline correction, refined again with the outline kept apart; kept if not worse."""
     topo, st = run.topo, run.st
-    st.stage(0.6, 0.95, "overlap correction")
+    st.stage(*PROGRESS["outline"], "overlap correction")
     # big patches: fewer rounds (each costs ~m), at least 2 (OUTLINE_BIG triangles: all rounds)
     rounds = max(2, min(OUTLINE_ROUNDS, OUTLINE_ROUNDS * OUTLINE_BIG // topo.m))
     UV2, it, _, term = correct_outline(UV, run.springs, topo, rounds=rounds, progress=st)
     run.it += it
     if refine_rounds > 0 and term is not None:
         # the correction relaxed the plain spring energy: refine again, outline kept apart
-        st.stage(st.last, 0.98, "length refinement (outline kept apart)")
+        st.stage(st.last, PROGRESS["outline refine"][1], "length refinement (outline kept apart)")
         UV3, it = refine_lengths_l1(UV2, run.springs, topo.edge_face_count.astype(np.float64),
                                     rounds=refine_rounds, F=topo.F, A0=topo.areas, extra=term, progress=st)
         run.it += it
@@ -301,7 +305,7 @@ def _outline_stage(run: _Run, UV, flipped: int, refine_rounds: int) -> tuple[np.
     the last flips left are untangled locally."""
     topo = run.topo
     if LOCAL_FIRST and len(boundary_self_intersections(UV, topo.F)):
-        run.st.stage(0.6, 0.7, "overlap correction (local)")
+        run.st.stage(*PROGRESS["local"], "overlap correction (local)")
         UV2, it, crossings2 = local_outline(UV, run.springs, topo)
         run.it += it
         if crossings2 == 0 and not run.flipped(UV2):
@@ -367,7 +371,7 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     t0 = time.perf_counter()
     st = _Stages(progress)
     V, F, topo0 = _check_patch(V, F, method, start)
-    st.stage(0.0, 0.1, "initial unfolding")
+    st.stage(*PROGRESS["start"], "initial unfolding")
     deficit, excess = _curvature_sums(topo0)
     F, used = submesh(F, np.ones(len(F), dtype=bool))  # vertices in no triangle are left out
     cut = cut_to_disk(V[used], F)
@@ -376,14 +380,14 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     springs = _build_springs(topo, CONTOUR_WINDOW if disturbing_springs else 0, crossed_springs)
     run = _Run(topo, springs, st)
     UV = _start(run, start)
-    st.stage(0.1, 0.35, "relaxing springs")
+    st.stage(*PROGRESS["relax"], "relaxing springs")
     far = False
     if relax:
         UV, far = _relax_stage(run, UV, method, max_iter)
-    st.stage(0.35, 0.45, "correcting flipped triangles")
+    st.stage(*PROGRESS["flips"], "correcting flipped triangles")
     UV, flipped = _flip_stage(run, UV, far)
     if relax and refine_rounds > 0 and not (far and flipped):
-        st.stage(0.45, 0.6, "length refinement")
+        st.stage(*PROGRESS["refine"], "length refinement")
         UV, flipped = _refine_stage(run, UV, flipped, refine_rounds, far)
     hopeless, reason = _hopeless(*run.errors(UV), deficit, excess)
     if not hopeless:
