@@ -55,8 +55,8 @@ def test_sixty_degree_cap_has_no_flips_and_bounded_error():
     assert u.flipped == 0 and u.overlaps == 0
     assert (signed_areas(u.UV, u.F) > 0).all()
     assert not overlapping_faces(u.UV, u.F).any()
-    # a sphere cannot be flattened: some error remains, but it is a few percent
-    assert 0.01 < u.EL < 0.045 and 0.01 < u.EA < 0.06
+    # a sphere cannot be flattened: some error remains; today's figures (2026-12-01) +-15 %
+    assert u.EL == pytest.approx(0.0356, rel=0.15) and u.EA == pytest.approx(0.0247, rel=0.15)
 
 
 def test_length_refinement_lowers_length_error():
@@ -159,7 +159,8 @@ def test_mild_cap_is_not_hopeless():
     V, F = spherical_cap(10.0, 30.0, 3)
     u = unfold_patch(V, F)
     assert not u.hopeless and u.hopeless_reason == ""
-    assert u.EL < 0.02 and u.flipped == 0 and u.overlaps == 0
+    assert u.EL == pytest.approx(0.0099, rel=0.15) and u.EA == pytest.approx(0.0070, rel=0.15)
+    assert u.flipped == 0 and u.overlaps == 0
     assert 0 < u.angle_deficit < 1.0 and u.angle_excess < 1e-6  # a sphere: deficit only
 
 
@@ -311,7 +312,8 @@ def test_scanned_nose_patches_unfold_without_overlaps():
         u = unfold_patch(p["V"], p["F"])
         assert u.overlaps == 0 and u.flipped == 0, p["name"]
         assert int(overlapping_faces(u.UV, u.F).sum()) == 0, p["name"]
-        assert u.EL < 0.045 and u.EA < 0.07, (p["name"], u.EL, u.EA)
+        el, ea = {"nose p1": (0.0390, 0.0619), "nose p2": (0.0315, 0.0532)}[p["name"]]  # bench, +-15 %
+        assert u.EL == pytest.approx(el, rel=0.15) and u.EA == pytest.approx(ea, rel=0.15), (p["name"], u.EL, u.EA)
 
 
 def test_errors_are_relative_to_the_skin_not_the_pattern():
