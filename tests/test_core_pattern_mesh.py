@@ -71,7 +71,8 @@ def test_islands_degenerate_input():
     labels = np.zeros(len(F), dtype=int)
     W = V.copy()
     W[5] = W[6]  # two coincident vertices: the triangles between them have no area
-    with pytest.raises(BolusError, match=r"the region has 2 zero-area triangle\(s\), e.g. triangle 1 \(vertices 1, 5, 6\)"):
+    with pytest.raises(BolusError, match=r"the region has 2 zero-area triangle\(s\), e.g. triangle 1 "
+                                         r"\(vertices 1, 5, 6\)"):
         patch_islands(W, F, labels)
     with pytest.raises(BolusError, match=r"e.g. the triangle on vertices 101, 105, 106: coincident"):
         patch_islands(W, F, labels, vert_ids=np.arange(len(V)) + 100)  # the user's (Blender's) indices

@@ -51,6 +51,12 @@ LABEL_MIN_SCALE = 0.4
 LABEL_GRID, LABEL_CENTROIDS = 40, 2000
 #: the outline is sampled this finely (a share of its length) to measure the room around a label
 OUTLINE_SAMPLES = 5000
+#: label candidates kept: this many farthest from the outline and as many near the centre and roomy
+LABEL_KEEP = 60
+#: a label fills at most this share of the free room around it
+LABEL_FILL = 0.9
+#: text width per character, in font sizes (bold label, regular metrics line; sans-serif)
+CHAR_W_BOLD, CHAR_W_REGULAR = 0.62, 0.55
 
 
 # --------------------------------------------------------------------------- outlines
@@ -141,7 +147,7 @@ def _label_candidates(UV, F, A, B, centre):
     t = (np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)) / np.repeat(k, k)
     dist = cKDTree(A[seg] + t[:, None] * (B - A)[seg]).query(cand)[0]
     off = np.linalg.norm(cand - centre, axis=1)
-    pick = np.unique(np.concatenate([np.argsort(-dist)[:60], np.argsort(off - 3 * dist)[:60]]))
+    pick = np.unique(np.concatenate([np.argsort(-dist)[:LABEL_KEEP], np.argsort(off - 3 * dist)[:LABEL_KEEP]]))
     return cand[pick], off[pick]
 
 
@@ -169,8 +175,8 @@ def _label_place(UV: np.ndarray, F: np.ndarray, loops: list[np.ndarray], text_w:
     A = np.concatenate(loops)
     B = np.concatenate([np.roll(L, -1, axis=0) for L in loops])
     cand, off = _label_candidates(UV, F, A, B, _centroid(loops[0]))
-    fit = np.minimum(1.0, np.minimum(0.9 * _free_room(cand, A, B, 0) / max(text_w, 1e-9),
-                                     0.9 * _free_room(cand, A, B, 1) / max(text_h, 1e-9)))
+    fit = np.minimum(1.0, np.minimum(LABEL_FILL * _free_room(cand, A, B, 0) / max(text_w, 1e-9),
+                                     LABEL_FILL * _free_room(cand, A, B, 1) / max(text_h, 1e-9)))
     best = np.flatnonzero(fit >= fit.max() * (1 - 1e-9))
     i = best[np.argmin(off[best])]
     return cand[i], float(np.clip(fit[i], LABEL_MIN_SCALE, 1.0))
@@ -256,7 +262,7 @@ def _write_piece(g_all, piece, page: _Page, f, path_decimals: int, taken: set) -
         ET.SubElement(g, "path", {
             "class": "seam", "d": _path_d(page.paper(S), path_decimals), "fill": "none", "stroke": "#000000",
             "stroke-width": f(SEAM_STROKE_MM), "stroke-dasharray": "2 1"})
-    text_w = max(0.62 * FONT_LABEL_MM * len(label), 0.55 * FONT_METRICS_MM * len(metrics or ""))
+    text_w = max(CHAR_W_BOLD * FONT_LABEL_MM * len(label), CHAR_W_REGULAR * FONT_METRICS_MM * len(metrics or ""))
     c, k = _label_place(UV, F, loops, text_w, 10.0 if metrics else 5.0)
     c = page.paper(c[None])[0]
     common = {"text-anchor": "middle", "font-family": "sans-serif", "fill": "#000000"}
