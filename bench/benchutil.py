@@ -148,10 +148,19 @@ def append_markdown(path, text: str) -> None:
 
 
 def run_line(script: str, argv) -> str:
-    """The command a section was made with and when (for the markdown)."""
+    """The command a section was made with, when it finished and how busy the machine was (markdown)."""
     args = [a if " " not in a else repr(a) for a in (argv if argv is not None else sys.argv[1:])]
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    return "`" + " ".join([".venv/bin/python", f"bench/{script}", *args]) + f"`, run {stamp}."
+    cmd = " ".join([".venv/bin/python", f"bench/{script}", *args])
+    return f"`{cmd}`, finished {stamp} ({load_text()})."
+
+
+def load_text() -> str:
+    """The machine's 1-minute load average against its CPU count (timings on a busy machine are slower)."""
+    try:
+        return f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs"
+    except OSError:
+        return "load average unknown"
 
 
 def _cpu_model() -> str:
@@ -187,7 +196,7 @@ def markdown_header() -> str:
         import bpy  # noqa: F401  (its version goes into the header)
     v = versions()
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    rows = [("date", stamp), ("commit", _commit()),
+    rows = [("date", stamp), ("commit", _commit()), ("load at the start", load_text()),
             ("machine", f"{platform.system()} {platform.machine()}, {_cpu_model()}, {v['cpus']} CPUs, "
                         f"{_memory_gb()} RAM"),
             ("Blender (bpy module)", v.get("bpy", "not installed")), ("Python", v["python"]),
@@ -201,7 +210,8 @@ def markdown_header() -> str:
             "The figures are printed and recorded, not asserted (speed and memory targets live here, not in "
             "the tests).\n"
             "Every table puts us beside a peer measured in the same run on the same input. The machine is "
-            "shared, so compare times within one table, not across runs.\n\n" + t.markdown() + "\n")
+            "shared (other jobs ran beside these: see the load averages), so compare times within one table, "
+            "not across runs.\n\n" + t.markdown() + "\n")
 
 
 # ----------------------------------------------------------------------------- process and Blender helpers
