@@ -19,7 +19,7 @@ from .core.errors import BolusError
 from .core.remesh_maps import label_range
 from .core.topology import submesh
 
-__all__ = ["Region", "mm_per_unit", "world_mm", "read_region", "size_warning", "check_finite", "read_face_labels", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "polygons_next_to", "set_seams", "show_colors"]
+__all__ = ["Region", "mm_per_unit", "world_mm", "read_region", "size_warning", "check_finite", "read_face_labels", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "polygons_next_to", "set_seams", "show_colors", "polygon_corners", "new_mesh"]
 
 
 def mm_per_unit(scene: bpy.types.Scene) -> float:
@@ -322,6 +322,29 @@ def set_seams(me: bpy.types.Mesh, seam: np.ndarray, touched: np.ndarray) -> None
     cur = get_array(me.edges, "use_seam", ne, bool)
     new = np.where(touched, seam, cur)
     me.edges.foreach_set("use_seam", new)
+
+
+def polygon_corners(me: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(loop_start (P,), loop_total (P,), loop vertex (L,)) of a mesh's polygons."""
+    out = [np.empty(n, dtype=np.int64) for n in (len(me.polygons), len(me.polygons), len(me.loops))]
+    me.polygons.foreach_get("loop_start", out[0])
+    me.polygons.foreach_get("loop_total", out[1])
+    me.loops.foreach_get("vertex_index", out[2])
+    return out[0], out[1], out[2]
+
+
+def new_mesh(name: str, co: np.ndarray, corner_vert: np.ndarray, loop_starts: np.ndarray) -> bpy.types.Mesh:
+    """A mesh from vertex positions (N,3), polygon corners (c,) and their first corners (p,)."""
+    me = bpy.data.meshes.new(name)
+    me.vertices.add(len(co))
+    me.vertices.foreach_set("co", co.ravel())
+    me.loops.add(len(corner_vert))
+    me.loops.foreach_set("vertex_index", corner_vert)
+    me.polygons.add(len(loop_starts))
+    me.polygons.foreach_set("loop_start", loop_starts)
+    me.update(calc_edges=True)
+    me.validate(clean_customdata=False)
+    return me
 
 
 def _edit_owner(me: bpy.types.Mesh) -> bpy.types.Object | None:

@@ -78,29 +78,6 @@ def is_pattern_object(obj) -> bool:
             and (PROP_PATTERN_TABLE in obj or ATTR_SOURCE_FACE in obj.data.attributes))
 
 
-def _polygon_corners(me: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(loop_start (P,), loop_total (P,), loop vertex (L,)) of a mesh's polygons."""
-    out = [np.empty(n, dtype=np.int64) for n in (len(me.polygons), len(me.polygons), len(me.loops))]
-    me.polygons.foreach_get("loop_start", out[0])
-    me.polygons.foreach_get("loop_total", out[1])
-    me.loops.foreach_get("vertex_index", out[2])
-    return out[0], out[1], out[2]
-
-
-def _new_mesh(name: str, co: np.ndarray, corner_vert: np.ndarray, loop_starts: np.ndarray) -> bpy.types.Mesh:
-    """A mesh from vertex positions (N,3), polygon corners (c,) and their first corners (p,)."""
-    me = bpy.data.meshes.new(name)
-    me.vertices.add(len(co))
-    me.vertices.foreach_set("co", co.ravel())
-    me.loops.add(len(corner_vert))
-    me.loops.foreach_set("vertex_index", corner_vert)
-    me.polygons.add(len(loop_starts))
-    me.polygons.foreach_set("loop_start", loop_starts)
-    me.update(calc_edges=True)
-    me.validate(clean_customdata=False)
-    return me
-
-
 def _link_object(context, src: bpy.types.Object, name: str, me: bpy.types.Mesh) -> bpy.types.Object:
     """The object ``name`` given the mesh ``me`` (its old mesh freed), or a new one beside ``src``."""
     obj = bpy.data.objects.get(name)
@@ -122,10 +99,10 @@ def build_pattern_object(context, job: _UnfoldJob) -> bpy.types.Object:
     region = job.region
     src = region.obj
     b = build_pattern(region.V, region.F, region.tri_poly, region.vert_ids, job.islands, job.done, job.poly_labels,
-                      *_polygon_corners(region.mesh), mm_per_unit=region.mm_per_unit, gap_mm=job.gap_mm)
+                      *mesh_io.polygon_corners(region.mesh), mm_per_unit=region.mm_per_unit, gap_mm=job.gap_mm)
     diagnose_pieces(region.V, region.F, job.islands, job.done, b.rows, job.warn_pct / 100.0, job.sigma_mm)
     name = src.name + PATTERN_SUFFIX
-    me = _new_mesh(name, b.co, b.polygons.corner_pat, b.polygons.loop_starts)
+    me = mesh_io.new_mesh(name, b.co, b.polygons.corner_pat, b.polygons.loop_starts)
     mesh_io.write_attribute(me, ATTR_SOURCE_FACE, "INT", "FACE", b.polygons.polys)
     mesh_io.write_attribute(me, ATTR_PATCH, "INT", "FACE", b.poly_patch)
     mesh_io.write_attribute(me, ATTR_AREA_ERROR, "FLOAT", "FACE", b.area_error)
@@ -217,3 +194,8 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
 
 
 classes = (BOLUS_OT_unfold,)
+
+
+# print_ops still imports these two names from here (until it imports mesh_io's)
+_new_mesh = mesh_io.new_mesh
+_polygon_corners = mesh_io.polygon_corners
