@@ -21,7 +21,8 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
-from conftest import ASSETS, attr_array, enter_edit_mode_with_faces, import_obj, make_object, mesh_snapshot
+from conftest import (ASSETS, assert_same_object, attr_array, enter_edit_mode_with_faces, import_obj, make_object,
+                      object_snapshot)
 from meshgen import cone_piece, cylinder_piece, spherical_cap
 
 from bolus_addon.core.geometry2d import cross2d
@@ -633,44 +634,19 @@ def test_unit_scale_is_honoured(bpy_addon, scene, tmp_path):
 
 
 # =========================================================================== 8. source intact, rerun
-def full_snapshot(ob):
-    me = ob.data
-    attrs = {}
-    for a in me.attributes:
-        if a.data_type in ("FLOAT", "INT", "BOOLEAN") and not a.name.startswith("."):
-            attrs[a.name] = attr_array(me, a.name, np.float64 if a.data_type == "FLOAT" else np.int64)
-    props = {k: (ob[k] if not hasattr(ob[k], "to_dict") else ob[k].to_dict()) for k in ob.keys()}
-    return mesh_snapshot(me), attrs, props, np.array(ob.matrix_world), len(me.color_attributes)
-
-
-def assert_same(before, after):
-    (co0, l0, s0, n0), a0, p0, M0, c0 = before
-    (co1, l1, s1, n1), a1, p1, M1, c1 = after
-    np.testing.assert_array_equal(co0, co1)
-    np.testing.assert_array_equal(l0, l1)
-    np.testing.assert_array_equal(s0, s1)
-    assert n0 == n1
-    assert a0.keys() == a1.keys()
-    for k in a0:
-        np.testing.assert_array_equal(a0[k], a1[k], err_msg=k)
-    assert p0 == p1
-    np.testing.assert_array_equal(M0, M1)
-    assert c0 == c1
-
-
 def test_source_untouched_and_rerun_replaces_pattern(bpy_addon, scene):
     bpy = bpy_addon
     src = load_knee_segmented(bpy, 3)
-    before = full_snapshot(src)
+    before = object_snapshot(src)
     assert bpy.ops.bolus.unfold() == {"FINISHED"}
-    assert_same(before, full_snapshot(src))
+    assert_same_object(before, object_snapshot(src))
     assert bpy.context.view_layer.objects.active == src, "the source stays active"
     pat = pattern_of(bpy, src)
     n_meshes, n_objects = len(bpy.data.meshes), len(bpy.data.objects)
     ptr_obj, ptr_mesh, nv = pat.as_pointer(), pat.data.as_pointer(), len(pat.data.vertices)
     pat.location = (5.0, 1.0, 2.0)  # the user moved the pattern
     assert bpy.ops.bolus.unfold(gap_mm=40.0) == {"FINISHED"}
-    assert_same(before, full_snapshot(src))
+    assert_same_object(before, object_snapshot(src))
     assert pattern_objects(bpy) == [src.name + "_pattern"], "no '<name>_pattern.001'"
     assert len(bpy.data.objects) == n_objects
     assert len(bpy.data.meshes) == n_meshes, "the old pattern mesh must not be left behind"
@@ -738,12 +714,12 @@ def test_unfold_degenerate_patch(bpy_addon, scene, case):
     bpy = bpy_addon
     V, F, message = BAD_MESHES[case]
     src = make_object(bpy, V, F, name="bad", scale_length=0.001)
-    before = full_snapshot(src)
+    before = object_snapshot(src)
     n = len(bpy.data.meshes)
     with pytest.raises(RuntimeError, match=message):
         bpy.ops.bolus.unfold()
     no_new_pattern(bpy, n)
-    assert_same(before, full_snapshot(src))
+    assert_same_object(before, object_snapshot(src))
 
 
 def test_unfold_small_patch_among_good_ones(bpy_addon, scene):
