@@ -444,3 +444,24 @@ def test_switched_off_springs_are_left_out_of_the_model():
     plain = build_springs(topo, contour_window=0, crossed=False)
     assert full.n_tension == plain.n_tension == len(plain.ends) == len(topo.edges)
     assert len(full.ends) > len(topo.edges) and len(full.contour_rest) > 0 and len(plain.contour_rest) == 0
+
+
+def test_contour_windows_follow_the_boundary_in_a_canonical_order():
+    """Disturbing springs (eq. 4-25): every window is CONTOUR_WINDOW consecutive boundary
+    edges (walked by cutting.boundary_loops); the first starts at the lowest boundary edge
+    and runs towards that edge's higher vertex, so the energy's sums (and their rounding,
+    which decides a hopeless nostril patch: EL 26.1 % vs 33.5 %) do not depend on the walker."""
+    from bolus_addon.core.springs import CONTOUR_WINDOW
+
+    V, F = grid(7, 5)
+    topo = MeshTopology(V, F)
+    W = build_springs(topo).contour_edges
+    E = topo.edges
+    nb = int(topo.boundary_edges.sum())
+    assert W.shape == (nb, CONTOUR_WINDOW) and topo.boundary_edges[W].all()
+    assert W[0, 0] == np.nonzero(topo.boundary_edges)[0].min()
+    assert E[W[0, 1]].tolist().count(E[W[0, 0], 1]) == 1  # towards the higher vertex
+    for w in W:  # consecutive edges share a vertex
+        for a, b in zip(w, w[1:]):
+            assert len(set(E[a].tolist()) & set(E[b].tolist())) == 1
+    np.testing.assert_array_equal(W[1:, 0], W[:-1, 1])  # window k+1 starts one edge on

@@ -96,19 +96,30 @@ def _crossed_pairs(topo: MeshTopology) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([a, b], axis=1), _hinge_distance(topo.V, i, j, a, b)
 
 
+def _canonical_edge_loop(topo: MeshTopology, loop: np.ndarray) -> np.ndarray:
+    """Edge indices (k,) of a closed vertex loop, starting at its lowest edge index and
+    running on towards that edge's higher vertex (an order that does not depend on the
+    walker; the energy sums in it, and on a hopeless patch their rounding matters)."""
+    edges = _edge_ids(topo, np.stack([loop, np.roll(loop, -1)], axis=1))
+    s = int(np.argmin(edges))
+    edges = np.roll(edges, -s)
+    if loop[(s + 1) % len(loop)] != topo.edges[edges[0], 1]:  # walked the other way
+        edges = np.r_[edges[:1], edges[1:][::-1]]
+    return edges
+
+
 def _contour_windows(topo: MeshTopology, window: int) -> np.ndarray:
     """(w, window) tension-spring (= edge) indices of every window of consecutive boundary
     edges along each boundary loop longer than the window (`cutting.boundary_loops`)."""
-    windows = []
+    loops = []
     if window >= 2 and np.count_nonzero(topo.boundary_edges) > window:
-        for loop in boundary_loops(topo.F, topo):
-            if len(loop) <= window:
-                continue
-            edges = _edge_ids(topo, np.stack([loop, np.roll(loop, -1)], axis=1))
-            k = np.arange(len(edges))
-            windows.append(edges[(k[:, None] + np.arange(window)[None, :]) % len(edges)])
-    if not windows:
+        loops = [_canonical_edge_loop(topo, loop) for loop in boundary_loops(topo.F, topo) if len(loop) > window]
+    if not loops:
         return np.zeros((0, max(window, 1)), dtype=np.int64)
+    windows = []
+    for edges in sorted(loops, key=lambda e: int(e[0])):
+        k = np.arange(len(edges))
+        windows.append(edges[(k[:, None] + np.arange(window)[None, :]) % len(edges)])
     return np.concatenate(windows)
 
 
