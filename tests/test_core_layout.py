@@ -133,3 +133,57 @@ def test_pack_rejects_bad_input():
         pack_islands([np.zeros((3, 2))], gap_mm=-1)
     with pytest.raises(BolusError):
         pack_islands([np.zeros((3, 2))], max_row_width_mm=0)
+
+
+# ------------------------------------------------------------------ print parts on the plate
+from bolus_addon.core.layout import centre_on_plate, plate_layout  # noqa: E402
+from bolus_addon.core.print_orientation import rotation_to_z  # noqa: E402
+
+
+def _parts(seed=0):
+    rng = np.random.default_rng(seed)
+    parts = [rng.standard_normal((60, 3)) * s + o for s, o in
+             (([30, 10, 5], [100, 0, 0]), ([5, 40, 8], [0, -50, 20]), ([12, 12, 12], [0, 0, 0]))]
+    dirs = rng.standard_normal((3, 3))
+    return parts, [rotation_to_z(d) for d in dirs], dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+
+
+def test_plate_layout_keeps_build_direction_up_rests_on_plate_and_separates_parts():
+    parts, rots, dirs = _parts()
+    placed = plate_layout(parts, rots, gap_mm=10.0)
+    boxes = []
+    for V, d, (R, t) in zip(parts, dirs, placed):
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+        assert np.linalg.det(R) == pytest.approx(1.0)
+        np.testing.assert_allclose(R @ d, [0, 0, 1], atol=1e-12)  # the build direction stays +Z
+        W = V @ R.T + t
+        assert W[:, 2].min() == pytest.approx(0.0, abs=1e-9)
+        np.testing.assert_allclose(np.linalg.norm(W[1:] - W[:-1], axis=1), np.linalg.norm(V[1:] - V[:-1], axis=1))
+        boxes.append((W[:, :2].min(axis=0), W[:, :2].max(axis=0)))
+    for i in range(3):
+        for j in range(i + 1, 3):
+            (lo1, hi1), (lo2, hi2) = boxes[i], boxes[j]
+            gap = np.maximum(lo2 - hi1, lo1 - hi2).max()  # separated along x or y
+            assert gap >= 10.0 - 1e-9
+    assert min(b[0].min() for b in boxes) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_centre_on_plate_and_bad_input():
+    W = np.array([[1.0, 2.0, 3.0], [5.0, -4.0, 7.0]])
+    np.testing.assert_allclose(W + centre_on_plate(W), [[-2.0, 3.0, 0.0], [2.0, -3.0, 4.0]])
+    np.testing.assert_array_equal(centre_on_plate(np.zeros((0, 3))), np.zeros(3))
+    parts, rots, _ = _parts()
+    bad = parts[0].copy()
+    bad[7, 1] = np.nan
+    with pytest.raises(BolusError, match="non-finite"):
+        centre_on_plate(bad)
+    with pytest.raises(BolusError, match="part 0 has non-finite"):
+        plate_layout([bad] + parts[1:], rots)
+    with pytest.raises(BolusError, match="not a proper 3x3 rotation"):
+        plate_layout(parts, [np.diag([1.0, 1.0, -1.0])] + rots[1:])
+    with pytest.raises(BolusError, match="3 parts but 2 rotations"):
+        plate_layout(parts, rots[:2])
+    # a part squashed to a point or a segment in the footprint is still placed
+    flat = [np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 5.0]]), np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0]])]
+    out = plate_layout(flat, [np.eye(3), np.eye(3)])
+    assert all(np.isfinite(R).all() and np.isfinite(t).all() for R, t in out)

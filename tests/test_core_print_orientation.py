@@ -217,3 +217,119 @@ def test_bad_input_is_refused():
         rotation_to_z([np.nan, 0, 1])
     with pytest.raises(ValueError):  # BolusError is a ValueError
         orient(V, F[:, :2])
+
+
+# ------------------------------------------------------------ degenerate input (issue 10)
+from meshgen import degenerate_variants  # noqa: E402
+
+from bolus_addon.core.print_measures import PrintTerms, open_surface_note  # noqa: E402
+from bolus_addon.core.print_orientation import (  # noqa: E402
+    PrintPlan,
+    orient_print_parts,
+    skin_side_up_direction,
+)
+
+_BOX = box((40.0, 30.0, 20.0), 3)
+_DEGENERATE = degenerate_variants(*_BOX)
+_B = fibonacci_sphere(64)
+
+
+@pytest.mark.parametrize("name", sorted(_DEGENERATE))
+def test_print_measures_on_degenerate_meshes(name):
+    """NaN/inf are refused naming the vertex; zero-area, needle and non-manifold triangles are
+    sound: each face counts with its area (a zero-area face adds nothing), the plate is the lowest vertex."""
+    V, F, says = _DEGENERATE[name]
+    calls = [lambda: print_objective(V, F, _B), lambda: face_support(V, F, Z), lambda: surface_quality(V, F, Z),
+             lambda: normal_curvature(V, F), lambda: orient(V, F), lambda: orient_parts(V, F, np.zeros(len(F), int)),
+             lambda: orient_print_parts(V, F, np.zeros(len(F), int)), lambda: skin_side_up_direction(V, F),
+             lambda: place_on_plate(V, Z)]
+    if name in ("nan", "inf"):
+        for call in calls:
+            with pytest.raises(BolusError, match=says):
+                call()
+        return
+    Vc, Fc = _BOX
+    o, clean = print_objective(V, F, _B), print_objective(Vc, Fc, _B)
+    extra = MeshTopology(V, F[len(Fc):])  # the triangles degenerate_variants added
+    z0 = (V[np.unique(F)] @ _B.T).min(axis=0)
+    dq = 0.2 * np.abs(extra.face_normals @ _B.T).T @ extra.areas
+    np.testing.assert_allclose(o.WQ, clean.WQ + dq, rtol=1e-12, atol=1e-9)  # eq. 6-7 face by face
+    if name in ("coincident", "needle"):  # no new lowest point (the needle's tip lies inside the box's side)
+        np.testing.assert_allclose(z0, (Vc @ _B.T).min(axis=0), atol=1e-9)
+    for x in (o.WQ, o.WU, o.support_volume, normal_curvature(V, F).vertex, face_support(V, F, Z)):
+        assert np.isfinite(x).all()
+    r = orient(V, F)
+    assert np.isfinite(r.objective) and r.objective <= 1.01 * o.objective.min()
+    if name == "coincident":  # a zero-area face changes nothing
+        np.testing.assert_allclose(o.objective, clean.objective, rtol=1e-12)
+        assert r.objective == pytest.approx(orient(Vc, Fc).objective, rel=1e-9)
+
+
+def test_zero_area_part_and_bad_labels_are_refused_by_name():
+    V, F = grid(3, 3, 30.0)
+    V0 = V.copy()
+    V0[:, :] = V0[:, :1] * [1.0, 0.0, 0.0]  # every vertex on the x axis: all faces of zero area
+    for call in (lambda: orient(V0, F), lambda: print_objective(V0, F, Z), lambda: skin_side_up_direction(V0, F)):
+        with pytest.raises(BolusError, match="the part has zero area"):
+            call()
+    lab = np.zeros(len(F), int)
+    with pytest.raises(BolusError, match="one integer per triangle"):
+        orient_print_parts(V, F, lab[:-1])
+    with pytest.raises(BolusError, match="no triangle belongs to a print part"):
+        orient_print_parts(V, F, lab - 1)
+    with pytest.raises(BolusError, match="part 1 has no faces"):
+        orient_parts(V, F, np.where(np.arange(len(F)) > 4, 2, 0))
+    V2 = V.copy()
+    V2[F[:2].ravel()] = V2[F[0, 0]]  # part 1 = two triangles collapsed onto one point
+    lab2 = np.r_[1, 1, np.zeros(len(F) - 2, int)]
+    with pytest.raises(BolusError, match="print part 1 has no area"):
+        orient_print_parts(V2, F, lab2)
+
+
+def test_orient_print_parts_rows_gaps_outside_faces_and_skin_side():
+    V, F = box((40.0, 30.0, 20.0), 3)
+    C = V[F].mean(axis=1)
+    labels = np.where(C[:, 0] > 20, 3, 0)  # parts 0 and 3 (a gap), ...
+    labels[C[:, 2] > 19.9] = -1  # ... the top face in no part
+    plan = orient_print_parts(V, F, labels)
+    assert isinstance(plan, PrintPlan) and [r.part for r in plan.parts] == [0, 3]
+    assert plan.whole.faces == len(F) and plan.whole.orientation.objective == pytest.approx(orient(V, F).objective)
+    for r in plan.parts:
+        Fi = F[labels == r.part]
+        assert r.faces == len(Fi) and r.area_mm2 == pytest.approx(MeshTopology(V, Fi).areas.sum())
+        assert r.orientation.objective == pytest.approx(orient(V, Fi).objective, rel=1e-12)
+    assert plan.parts_support_mm3 == pytest.approx(sum(r.orientation.support_volume for r in plan.parts))
+    rows = plan.rows()
+    assert [r["part"] for r in rows] == ["whole", "part 0", "part 3"]
+    assert rows[1]["support_volume_mm3"] == plan.parts[0].orientation.support_volume
+    # the whole box needs no support standing on a side: no ratio
+    assert plan.whole.orientation.support_volume == 0.0 and plan.support_ratio is None
+    # a tiny part is oriented but flagged
+    lab3 = np.zeros(len(F), int)
+    lab3[:2] = 1
+    assert any("part 1 has only 2 triangles" in w for w in orient_print_parts(V, F, lab3, whole=False).warnings)
+    # skin side up: the cap's normals point out, so its inside (the skin) faces up
+    Vc, Fc = spherical_cap(50.0, 90.0, 3)
+    d = skin_side_up_direction(Vc, Fc)
+    np.testing.assert_allclose(d, -Z, atol=1e-9)
+    up = orient_print_parts(Vc, Fc, np.zeros(len(Fc), int), skin_side_up=True, whole=False).parts[0].orientation
+    assert up.direction @ d >= -1e-12 and up.objective == pytest.approx(orient(Vc, Fc, favour=d).objective)
+    with pytest.raises(BolusError, match="no prevailing side"):
+        skin_side_up_direction(*icosphere(2, 30.0))
+
+
+def test_open_surface_note_and_terms_near_match_exact():
+    assert open_surface_note(MeshTopology(*box())) is None
+    Vc, Fc = spherical_cap(50.0, 60.0, 2)
+    t = MeshTopology(Vc, Fc)
+    assert open_surface_note(t).startswith(f"open surface ({int(t.boundary_edges.sum())} boundary edges)")
+    # the cheap cap evaluation is exact: the same figures as the plain one
+    terms = PrintTerms.exact(t)
+    b = np.array([0.3, -0.2, -0.93])
+    b /= np.linalg.norm(b)
+    T = b + 0.05 * np.random.default_rng(0).standard_normal((40, 3))
+    T /= np.linalg.norm(T, axis=1, keepdims=True)
+    radius = float(np.arccos(np.clip(T @ b, -1, 1)).max())
+    for near, plain in zip(terms.evaluate_near(b, T, radius, 0.2, np.cos(np.radians(45))),
+                           terms.evaluate(T, 0.2, np.cos(np.radians(45)))):
+        np.testing.assert_allclose(near, plain, rtol=1e-9, atol=1e-6)

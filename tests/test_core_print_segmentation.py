@@ -107,3 +107,57 @@ def test_bad_input_is_refused():
         print_segment(V, F, 2.5)
     with pytest.raises(BolusError):
         part_stats(V, F, np.zeros(3, dtype=int))
+
+
+# ------------------------------------------------------------ polygons, table, degenerate input (issue 10)
+from meshgen import degenerate_variants  # noqa: E402
+
+
+def test_face_groups_keep_each_polygon_in_one_part():
+    V, F = grid(12, 6, 120.0)  # two triangles per square: group them as quads
+    groups = np.arange(len(F)) // 2
+    seg = print_segmentation(V, F, 3, rng=0, face_groups=groups)
+    for g in np.unique(groups):
+        assert len(np.unique(seg.labels[groups == g])) == 1
+    _assert_parts_edge_connected(MeshTopology(V, F), seg.labels)
+    with pytest.raises(BolusError, match="face groups must be one per triangle"):
+        print_segmentation(V, F, 3, face_groups=groups[:-1])
+    with pytest.raises(BolusError, match="the mesh has 2 faces, fewer than the 3 parts asked"):
+        print_segmentation(V, F, 3, face_groups=np.arange(len(F)) * 2 // len(F))
+
+
+def test_table_and_count_note():
+    V, F = graded_strip()
+    t = MeshTopology(V, F)
+    seg = print_segmentation(V, F, 2, rng=0, topo=t)
+    assert seg.count_note() is None
+    tab = seg.table(V, F, t)
+    assert tab["method"] == "abcut" and tab["requested"] == 2
+    assert [r["part"] for r in tab["parts"]] == [0, 1]
+    assert sum(r["area_mm2"] for r in tab["parts"]) == pytest.approx(t.areas.sum())
+    assert tab["area_balance"] == pytest.approx(area_balance(seg.labels, t.areas))
+    seg.requested = 3
+    assert seg.count_note().startswith("2 parts instead of the 3 asked") and "5 %" in seg.count_note()
+
+
+@pytest.mark.parametrize("name", ["coincident", "collinear", "nan", "inf", "needle", "nonmanifold"])
+def test_print_segmentation_on_degenerate_meshes(name):
+    """NaN/inf refused naming the vertex; zero-area, needle triangles and non-manifold edges
+    are sound (area-floored in F^-1/2, no weight in the mixture; the dual graph joins the
+    faces around an edge in turn): finite embedding, edge-connected parts."""
+    V, F = grid(10, 10, 100.0)
+    Vd, Fd, says = degenerate_variants(V, F)[name]
+    if name in ("nan", "inf"):
+        for call in (lambda: print_segmentation(Vd, Fd, 3), lambda: dual_graph_weights(MeshTopology(Vd, Fd))):
+            with pytest.raises(BolusError, match=says):
+                call()
+        return
+    t = MeshTopology(Vd, Fd)
+    for method in ("abcut", "ratiocut"):
+        seg = print_segmentation(Vd, Fd, 3, method=method, rng=0, topo=t)
+        assert np.isfinite(seg.embedding).all() and np.isfinite(seg.eigenvalues).all()
+        assert seg.part_count >= 2
+        if name != "collinear":  # its sliver touches the grid at one vertex only: a separate piece
+            _assert_parts_edge_connected(t, seg.labels)
+    stats = part_stats(Vd, Fd, seg.labels)
+    assert sum(s.faces for s in stats) == len(Fd)

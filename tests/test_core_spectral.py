@@ -158,3 +158,81 @@ def test_gmm_clustering_also_gives_connected_patches():
     for p in range(seg.patch_count):
         _, comp = t.face_components(np.where(seg.face_labels == p, 0, 1))
         assert len(np.unique(comp[seg.face_labels == p])) == 1
+
+
+# ------------------------------------------------------------ the one clustering step (issue 10)
+from meshgen import degenerate_variants  # noqa: E402
+
+from bolus_addon.core import clustering  # noqa: E402
+from bolus_addon.core.spectral import cluster_rows, vote_groups  # noqa: E402
+
+
+def _blobs(seed=0):
+    rng = np.random.default_rng(seed)
+    centres = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    lab = np.repeat(np.arange(3), [200, 100, 50])
+    return centres[lab] + 0.08 * rng.standard_normal((len(lab), 2)), lab
+
+
+@pytest.mark.parametrize("method", ["kmeans", "gmm"])
+def test_cluster_rows_finds_blobs_at_any_scale(method):
+    """The rows are standardised first, so the mixture's REG_COVAR means the same at every
+    embedding scale (a unit eigenvector of n entries has entries ~ 1/sqrt(n))."""
+    X, lab = _blobs()
+    X = np.c_[X, np.full(len(X), 3.0)]  # a constant column (the trivial eigenvector) is dropped
+    out = cluster_rows(X, 3, method=method, rng=0)
+    for scale in (1e-4, 1e4):
+        np.testing.assert_array_equal(cluster_rows(X * scale + 7.0, 3, method=method, rng=0), out)
+    # the same partition as the truth (up to the names of the clusters)
+    pairs = np.unique(np.c_[lab, out], axis=0)
+    assert len(pairs) == 3
+    np.testing.assert_array_equal(clustering.standardise_rows(X).shape, (len(X), 2))
+    assert np.sqrt((clustering.standardise_rows(X) ** 2).mean()) == pytest.approx(1.0)
+
+
+def test_cluster_rows_weights_and_bad_input():
+    X, lab = _blobs(1)
+    # weights: the mixture is fitted on rows drawn by weight; zero weight on a blob still labels its rows
+    w = np.where(lab == 2, 0.0, 1.0)
+    out = cluster_rows(X, 2, method="gmm", rng=0, weights=w)
+    assert len(np.unique(out[lab == 0])) == 1 and len(np.unique(out[lab == 1])) == 1
+    assert out[lab == 0][0] != out[lab == 1][0]
+    kw = cluster_rows(X, 3, method="kmeans", rng=0, weights=np.ones(len(X)))
+    np.testing.assert_array_equal(kw, cluster_rows(X, 3, method="kmeans", rng=0))
+    bad = X.copy()
+    bad[3, 0] = np.nan
+    with pytest.raises(BolusError, match="NaN or infinite"):
+        cluster_rows(bad, 3)
+    with pytest.raises(BolusError, match="row weights"):
+        cluster_rows(X, 3, weights=-w)
+    with pytest.raises(BolusError, match="cannot make 5 clusters of 4 rows"):
+        cluster_rows(X[:4], 5)
+    with pytest.raises(BolusError, match="method"):
+        cluster_rows(X, 3, method="dbscan")
+    assert clustering.REG_COVAR == 1e-6
+
+
+def test_vote_groups():
+    lab = np.array([0, 1, 1, 2, 0])
+    groups = np.array([7, 7, 7, 9, 9])
+    np.testing.assert_array_equal(vote_groups(lab, groups), [1, 1, 1, 0, 0])  # ties: the smaller label
+    np.testing.assert_array_equal(vote_groups(lab, groups, np.array([5.0, 1, 1, 3, 1])), [0, 0, 0, 2, 2])
+    with pytest.raises(BolusError, match="one per triangle"):
+        vote_groups(lab, groups[:-1])
+    with pytest.raises(BolusError, match=">= 0"):
+        vote_groups(lab - 1, groups)
+
+
+@pytest.mark.parametrize("name", ["coincident", "collinear", "nan", "inf", "needle", "nonmanifold"])
+def test_segment_on_degenerate_meshes(name):
+    """segment refuses what its flattenability analysis cannot measure, by name; a needle
+    triangle or a non-manifold edge is sound (the vertex graph is defined; the Blender
+    operator refuses non-manifold regions itself)."""
+    V, F = grid(8, 8, 80.0)
+    Vd, Fd, says = degenerate_variants(V, F)[name]
+    if says is None or name == "nonmanifold":
+        seg = segment(Vd, Fd, 2, rng=0)
+        assert np.isfinite(seg.embedding).all() and seg.patch_count >= 1
+        return
+    with pytest.raises(BolusError, match=says):
+        segment(Vd, Fd, 2, rng=0)

@@ -62,12 +62,14 @@ def cluster_rows(U, k: int, method: str = "kmeans", rng=None, weights=None) -> n
 
     if method not in METHODS:
         raise BolusError(f"unknown clustering method {method!r}; use 'kmeans' or 'gmm'")
+    U = np.asarray(U, dtype=np.float64)
+    if U.ndim != 2 or not np.isfinite(U).all():
+        raise BolusError(f"the spectral embedding must be a finite (n, d) array (NaN or infinite entries, "
+                         f"or shape {U.shape})")
     X = standardise_rows(U)
     n = len(X)
     if not 1 <= int(k) <= n:
         raise BolusError(f"cannot make {k} clusters of {n} rows")
-    if not np.isfinite(X).all():
-        raise BolusError("the spectral embedding has non-finite (NaN or infinite) entries")
     w = None
     if weights is not None:
         w = np.asarray(weights, dtype=np.float64)

@@ -39,7 +39,7 @@ from scipy.sparse.linalg import eigsh
 from .clustering import cluster_rows  # re-exported: the one clustering step (clustering.py)
 from .errors import BolusError
 from .saliency import SaliencyResult, analyse, corner_angle_sums, flattenability, flattenability_value
-from .topology import MeshTopology, submesh  # submesh: re-exported (it lived here)
+from .topology import MeshTopology, check_mesh, submesh  # submesh: re-exported (it lived here)
 
 __all__ = [
     "HIGH_SALIENCY",
@@ -321,7 +321,9 @@ def segment(
     topo: a `MeshTopology` of (V, F) already built by the caller (saves rebuilding it).
     """
     report = progress or (lambda f, t: None)
-    topo = MeshTopology(V, F) if topo is None else topo
+    # zero-area triangles have no angles (eq. 4-1): refused by name before anything else
+    topo = MeshTopology(*check_mesh(V, F, "the region")) if topo is None else topo
+    topo.require_nondegenerate("the region")
     k = int(patches)
     if k < 1:
         raise BolusError(f"ask for at least 1 patch, got {patches}")
