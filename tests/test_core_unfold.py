@@ -188,21 +188,24 @@ def test_patches_progress_is_overall_and_weighted_by_size():
     assert all(t.startswith(("patch 1/2: ", "patch 2/2: ")) for _, t in calls)
 
 
-def test_progress_is_reported_inside_long_minimisations():
+@pytest.fixture
+def ticking_clock(monkeypatch):
+    """relax.py's clock advances 1 s per reading: every iteration is "0.5 s later"."""
+    from types import SimpleNamespace
+
+    import bolus_addon.core.relax as relax_mod
+
+    clock = iter(range(10**6))
+    monkeypatch.setattr(relax_mod, "time", SimpleNamespace(perf_counter=lambda: float(next(clock))))
+
+
+def test_progress_is_reported_inside_long_minimisations(ticking_clock):
     V, F = spherical_cap(100.0, 60.0, 4)
     topo = MeshTopology(V, F)
     springs = build_springs(topo)
     UV0 = initial_unfolding(topo) * 1.3  # far from rest: many iterations
     seen = []
-    clock = iter(range(10**6))
-    import bolus_addon.core.relax as relax_mod
-
-    real = relax_mod.time.perf_counter
-    try:  # a clock that advances 1 s per reading: every iteration is "0.5 s later"
-        relax_mod.time.perf_counter = lambda: float(next(clock))
-        _, it, _ = relax_lbfgs(UV0, springs, max_iter=30, tol=0.0, progress=seen.append)
-    finally:
-        relax_mod.time.perf_counter = real
+    _, it, _ = relax_lbfgs(UV0, springs, max_iter=30, tol=0.0, progress=seen.append)
     assert it >= 5 and len(seen) >= it - 2
     assert all(0 < f <= 1 for f in seen) and seen == sorted(seen)
 
@@ -238,21 +241,12 @@ def test_relaxation_stops_when_asked():
     assert it == 50 and asked == [25, 50]
 
 
-def test_explicit_integrator_reports_progress():
+def test_explicit_integrator_reports_progress(ticking_clock):
     V, F = spherical_cap(100.0, 45.0, 2)
     topo = MeshTopology(V, F)
-    springs = build_springs(topo)
-    masses = lumped_mass(V, F)
     seen = []
-    clock = iter(range(10**6))
-    import bolus_addon.core.relax as relax_mod
-
-    real = relax_mod.time.perf_counter
-    try:
-        relax_mod.time.perf_counter = lambda: float(next(clock))
-        relax_explicit(initial_unfolding(topo), springs, masses, max_iter=1000, tol=0.0, progress=seen.append)
-    finally:
-        relax_mod.time.perf_counter = real
+    relax_explicit(initial_unfolding(topo), build_springs(topo), lumped_mass(V, F), max_iter=1000, tol=0.0,
+                   progress=seen.append)
     assert len(seen) >= 5 and seen == sorted(seen) and 0 < seen[0] and seen[-1] <= 1
 
 
