@@ -147,6 +147,17 @@ def check_invariants(V, F, labels, res):
     assert abs(b0 - b1) < 1e-9 * b0
 
 
+def cut_one_border(V, F, labels, method, closed):
+    """smooth_cuts with the invariants checked and one 0|1 border cut by ``method``:
+    (result, its report row, the new vertices on the border (k,3))."""
+    res = smooth_cuts(V, F, labels)
+    check_invariants(V, F, labels, res)
+    (rep,) = res.borders
+    assert rep.method == method and rep.closed is closed
+    verts = np.unique(border_edges(res.F, res.labels, 0, 1))
+    return res, rep, res.V[verts[verts >= len(V)]]
+
+
 # ------------------------------------------------------------------ curve fitting
 def test_projection_matches_eqs_4_7_to_4_9():
     rng = np.random.default_rng(1)
@@ -195,14 +206,10 @@ def test_jagged_straight_border_becomes_a_line():
     V, F, h = sheet()
     c = centroids(V, F)
     labels = (c[:, 0] > 50 + 0.3 * (c[:, 1] - 50)).astype(int)
-    res = smooth_cuts(V, F, labels)
-    check_invariants(V, F, labels, res)
-    (rep,) = res.borders
-    assert rep.method == "line" and not rep.closed
+    res, rep, P = cut_one_border(V, F, labels, "line", False)
+    P = P[:, :2]
     E = border_edges(res.F, res.labels, 0, 1)
     verts = np.unique(E)
-    new = verts[verts >= len(V)]
-    P = res.V[new, :2]
     # the new vertices are exactly on one straight line
     A = np.c_[P[:, 1], np.ones(len(P))]
     coef, *_ = np.linalg.lstsq(A, P[:, 0], rcond=None)
@@ -220,13 +227,8 @@ def test_curved_border_becomes_a_parabola():
     V, F, h = sheet()
     c = centroids(V, F)
     labels = (c[:, 0] - 50 - 0.01 * (c[:, 1] - 50) ** 2 > 0).astype(int)
-    res = smooth_cuts(V, F, labels)
-    check_invariants(V, F, labels, res)
-    (rep,) = res.borders
-    assert rep.method == "parabola"
-    E = border_edges(res.F, res.labels, 0, 1)
-    new = np.unique(E)[np.unique(E) >= len(V)]
-    x, y = res.V[new, 0], res.V[new, 1]
+    _, rep, P = cut_one_border(V, F, labels, "parabola", False)
+    x, y = P[:, 0], P[:, 1]
     # the new vertices lie on one conic, and that conic is a parabola (B^2 = 4AC); the
     # parabola's axis is the border's principal direction, not necessarily the y axis
     q = conic_through(x, y)
@@ -239,14 +241,8 @@ def test_enclosed_patch_gets_an_ellipse():
     V, F, h = sheet()
     c = centroids(V, F)
     labels = (np.linalg.norm(c[:, :2] - [45, 55], axis=1) < 25).astype(int)
-    res = smooth_cuts(V, F, labels)
-    check_invariants(V, F, labels, res)
-    (rep,) = res.borders
-    assert rep.closed and rep.method == "ellipse"
-    E = border_edges(res.F, res.labels, 0, 1)
-    new = np.unique(E)[np.unique(E) >= len(V)]
-    x, y = res.V[new, 0], res.V[new, 1]
-    q = conic_through(x, y)
+    _, rep, P = cut_one_border(V, F, labels, "ellipse", True)
+    q = conic_through(P[:, 0], P[:, 1])
     assert q[1] ** 2 - 4 * q[0] * q[2] < 0  # an ellipse
     assert rep.turning_after / rep.turning_before == pytest.approx(0.152, rel=0.15)  # measured
 
@@ -256,13 +252,7 @@ def test_ring_around_a_tube_is_cut_by_a_plane():
     V, F, _ = ring_surface(prof, na=48, pole=False)
     c = centroids(V, F)
     labels = (c[:, 2] > 60 + 0.3 * c[:, 0]).astype(int)
-    res = smooth_cuts(V, F, labels)
-    check_invariants(V, F, labels, res)
-    (rep,) = res.borders
-    assert rep.closed and rep.method == "plane section"
-    E = border_edges(res.F, res.labels, 0, 1)
-    new = np.unique(E)[np.unique(E) >= len(V)]
-    P = res.V[new]
+    _, rep, P = cut_one_border(V, F, labels, "plane section", True)
     _, sv, _ = np.linalg.svd(P - P.mean(0))
     assert sv[2] < 1e-9 * sv[0]
     assert rep.turning_after / rep.turning_before == pytest.approx(0.0249, rel=0.15)  # measured
@@ -272,10 +262,7 @@ def test_dome_loop_on_a_curved_surface():
     V, F = spherical_cap(50, 80, 4)
     c = centroids(V, F)
     labels = (np.linalg.norm(c[:, :2] - [10, 5], axis=1) < 20).astype(int)
-    res = smooth_cuts(V, F, labels)
-    check_invariants(V, F, labels, res)
-    (rep,) = res.borders
-    assert rep.closed and rep.method == "ellipse"
+    _, rep, _ = cut_one_border(V, F, labels, "ellipse", True)
     assert rep.turning_after / rep.turning_before == pytest.approx(0.191, rel=0.15)  # measured
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from meshgen import grid, grid_with_holes
 
-from bolus_addon.core.borders import border_components, order_edges, turning_per_mm
+from bolus_addon.core.borders import border_components, turning_per_mm
 from bolus_addon.core.curvefit import fit_closed_curve, fit_open_curve, project_to_plane, signed_distance_closed
 from bolus_addon.core.cutlines import cut_region_check, patch_table, smooth_cuts
 from bolus_addon.core.cutting import boundary_loops, cut_to_disk, split_along_edges, surface_type
@@ -166,11 +166,59 @@ def test_border_components_are_topological():
         border_components(MeshTopology(V, F), labels[:-1])
 
 
-def test_order_edges_of_a_branch_is_none():
-    order, closed = order_edges(np.array([[0, 1], [1, 2], [1, 3]]))
-    assert order is None and not closed
-    order, closed = order_edges(np.array([[0, 1], [1, 2], [2, 0]]))
-    assert closed and sorted(order.tolist()) == [0, 1, 2]
+def walked_edges(order, closed):
+    """Sorted vertex pairs of consecutive vertices of an order (with the closing edge)."""
+    nxt = np.roll(order, -1) if closed else order[1:]
+    cur = order if closed else order[:-1]
+    return sorted(tuple(sorted(p)) for p in zip(cur.tolist(), nxt.tolist()))
+
+
+def faces_around(V, F, v):
+    """Triangles around vertex v, counter-clockwise by the angle of their centroid."""
+    f = np.nonzero((F == v).any(axis=1))[0]
+    d = V[F[f]].mean(axis=1)[:, :2] - V[v, :2]
+    return f[np.argsort(np.arctan2(d[:, 1], d[:, 0]))]
+
+
+def test_border_touching_itself_is_walked_along_the_surface():
+    """Two squares of patch 1 touching at one vertex (a pinch): one closed border passing the
+    vertex twice, each time from one square to the other (patch 0's boundary, cutting.boundary_loops)."""
+    V, F = grid(N, N, size=100.0)
+    c = V[F].mean(axis=1)
+    sq1 = (c[:, 0] > 25) & (c[:, 0] < 50) & (c[:, 1] > 25) & (c[:, 1] < 50)
+    sq2 = (c[:, 0] > 50) & (c[:, 0] < 75) & (c[:, 1] > 50) & (c[:, 1] < 75)
+    labels = (sq1 | sq2).astype(int)
+    (bd,) = border_components(MeshTopology(V, F), labels)
+    assert bd.closed and len(bd.order) == len(bd.edges) == 40
+    assert walked_edges(bd.order, True) == sorted(map(tuple, bd.edges.tolist()))
+    v = vid(10, 10)
+    at = np.nonzero(bd.order == v)[0]
+    assert len(at) == 2
+    for k in at:
+        prev, nxt = V[bd.order[k - 1], :2], V[bd.order[(k + 1) % len(bd.order)], :2]
+        assert (prev.sum() < 100) != (nxt.sum() < 100)  # from one square to the other
+
+
+def test_border_joined_where_a_third_patch_splits_a_fan_and_a_branch_is_none():
+    V, F = grid(N, N, size=100.0)
+    c = V[F].mean(axis=1)
+    labels = ((c[:, 0] > 25) & (c[:, 0] < 75) & (c[:, 1] > 25) & (c[:, 1] < 75)).astype(int)
+    for j in (10, 7):  # vertices (75, 50) and (75, 35) on the square's right side
+        outer = [f for f in faces_around(V, F, vid(15, j))
+                 if c[f, 0] > 75 and not {vid(15, j - 1), vid(15, j + 1)} & set(F[f].tolist())]
+        assert len(outer) == 1
+        labels[outer[0]] = 2  # a triangle of patch 2 touching the square at one vertex: 0's fan there in two wedges
+    bds = border_components(MeshTopology(V, F), labels)
+    (bd,) = [b for b in bds if (b.a, b.b) == (0, 1)]
+    assert bd.closed and len(bd.order) == len(bd.edges) == 40 and len(set(bd.order.tolist())) == 40
+    assert walked_edges(bd.order, True) == sorted(map(tuple, bd.edges.tolist()))
+    # a branch: three 0|1 edges meeting at one vertex
+    w = vid(5, 5)
+    ring = faces_around(V, F, w)
+    lab = np.full(len(F), 2)
+    lab[ring] = [0, 1, 0, 1, 2, 2]
+    (bd,) = border_components(MeshTopology(V, F), lab)[:1]
+    assert (bd.a, bd.b) == (0, 1) and len(bd.edges) == 3 and bd.order is None and not bd.closed
 
 
 def test_turning_per_mm_with_coincident_vertices_and_nan():

@@ -15,10 +15,11 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from .cutting import boundary_loops
 from .errors import BolusError
 from .topology import MeshTopology
 
-__all__ = ["Border", "border_components", "order_edges", "turning_per_mm", "hausdorff_mm", "edge_keys",
+__all__ = ["Border", "border_components", "turning_per_mm", "hausdorff_mm", "edge_keys",
            "edge_samples"]
 
 #: points per edge sampled for the Hausdorff distance (the ends and 7 between: 1/8 edge apart)
@@ -47,11 +48,19 @@ def border_components(topo: MeshTopology, labels: np.ndarray) -> list[Border]:
 
     Returns
     -------
-    list of `Border`, sorted by the pair (a, b), each with its edges (k,2) and its
-    vertices in order along it (`order_edges`).
+    list of `Border`, sorted by the pair (a, b) and, within a pair, by the lowest vertex
+    of each piece; each with its edges (k,2) (sorted pairs, in `topo.edges` order) and its
+    vertices in order along it.  The order is the boundary of patch a walked by
+    `cutting.boundary_loops` (the core's one boundary walker), so patch a lies on the left
+    of the direction of travel on a consistently oriented mesh and a border that touches
+    itself at a vertex (a "pinch" of the zig-zag) is passed through it along the surface;
+    pieces of a's boundary that meet at a vertex (where a third patch or the mesh's edge
+    interrupts a's boundary) are joined end to start.  ``order`` is None when a piece
+    branches (three or more of its ends meet).
 
-    Raises `BolusError` when ``labels`` has the wrong shape or when a border edge is
-    shared by more than two faces (a border is only defined on a manifold surface).
+    Raises `BolusError` when ``labels`` has the wrong shape or when a face of a patch at a
+    border has an edge shared by more than two faces (a border is only defined on a
+    manifold surface).
     """
     labels = np.asarray(labels)
     if labels.shape != (topo.m,):
@@ -69,67 +78,79 @@ def border_components(topo: MeshTopology, labels: np.ndarray) -> list[Border]:
     out: list[Border] = []
     for a, b in sorted(set(zip(lo.tolist(), hi.tolist()))):
         edges = topo.edges[np.unique(E[(lo == a) & (hi == b)])]
-        for ce in _edge_components(edges):
-            order, closed = order_edges(ce)
+        for ce, order, closed in _pair_pieces(topo, labels, a, edges):
             out.append(Border(a, b, ce, order, closed))
     return out
 
 
+def _pair_pieces(topo: MeshTopology, labels: np.ndarray, a: int, edges: np.ndarray):
+    """[(edges (k_i,2), order or None, closed)] of each connected piece of the a|b edges (k,2).
+
+    Runs of a|b edges along the boundary loops of patch a (only a's faces at the border:
+    their fans at the border vertices are complete, so the walk there is a's), joined.
+    """
+    on = np.zeros(topo.n, dtype=bool)
+    on[edges.ravel()] = True
+    fa = np.nonzero((labels == a) & on[topo.F].any(axis=1))[0]
+    keys = np.sort(edge_keys(edges))
+    runs = []  # (vertices, closed)
+    for lp in boundary_loops(topo.F[fa]):
+        flag = np.isin(edge_keys(np.stack([lp, np.roll(lp, -1)], 1)), keys)
+        if flag.all():
+            runs.append((lp, True))
+        elif flag.any():
+            k = int(np.argmin(flag))  # a non-border edge: start the loop there so no run wraps
+            r, f = np.r_[lp[k:], lp[:k], lp[k]], np.r_[flag[k:], flag[:k]]
+            bounds = np.flatnonzero(np.diff(np.r_[0, f.astype(np.int8), 0]))
+            runs += [(r[s : e + 1], False) for s, e in zip(bounds[0::2], bounds[1::2])]
+    pieces = []
+    for ce in _edge_components(edges):
+        vs = set(ce.ravel().tolist())
+        mine = [rn for rn in runs if rn[0][0] in vs]
+        order, closed = _join_runs(mine)
+        pieces.append((ce, order, closed))
+    return pieces
+
+
+def _join_runs(runs: list[tuple[np.ndarray, bool]]) -> tuple[np.ndarray | None, bool]:
+    """One vertex chain from runs of one connected piece, joined where one ends and the next
+    starts: (order, closed), or (None, False) when they do not make a single chain."""
+    if len(runs) == 1 and runs[0][1]:
+        return runs[0]
+    if any(closed for _, closed in runs):
+        return None, False
+    starts: dict[int, list[int]] = {}
+    for i, (rn, _) in enumerate(runs):
+        starts.setdefault(int(rn[0]), []).append(i)
+    if any(len(v) > 1 for v in starts.values()):
+        return None, False
+    ends = {int(rn[-1]) for rn, _ in runs}
+    first = [i for i, (rn, _) in enumerate(runs) if int(rn[0]) not in ends] or [0]
+    if len(first) > 1:
+        return None, False
+    chain, used, i = [runs[first[0]][0]], {first[0]}, first[0]
+    while True:
+        nxt = starts.get(int(runs[i][0][-1]), [])
+        if not nxt or nxt[0] in used:
+            break
+        i = nxt[0]
+        used.add(i)
+        chain.append(runs[i][0][1:])
+    if len(used) != len(runs):
+        return None, False
+    order = np.concatenate(chain)
+    if order[0] == order[-1] and len(order) > 2:
+        return order[:-1], True
+    return order, False
+
+
 def _edge_components(edges: np.ndarray) -> list[np.ndarray]:
-    """The edge-connected pieces (each (k_i,2)) of an edge set (k,2)."""
+    """The edge-connected pieces (each (k_i,2)) of an edge set (k,2), by their lowest vertex."""
     verts, inv = np.unique(edges.ravel(), return_inverse=True)
     inv = inv.reshape(-1, 2)
     G = sp.coo_matrix((np.ones(len(inv)), (inv[:, 0], inv[:, 1])), shape=(len(verts),) * 2)
     ncomp, comp = connected_components(G, directed=False)
     return [edges[comp[inv[:, 0]] == c] for c in range(ncomp)]
-
-
-def order_edges(edges: np.ndarray) -> tuple[np.ndarray | None, bool]:
-    """Vertices of a connected edge set along it.
-
-    Parameters
-    ----------
-    edges : (k,2) int vertex pairs, edge-connected.
-
-    Returns
-    -------
-    (order, closed): order (j,) int64 the vertices along the edges (j = k + 1 for an
-    open chain, k for a loop, whose closing edge is order[-1] -> order[0]), or None when
-    the edges cannot be walked in one go (a real branch); closed True for a loop.
-
-    A border may touch itself at a vertex (four border edges there, a "pinch" of the
-    zig-zag); the walk then goes on along an edge not yet used, using every edge once
-    (Hierholzer's algorithm on the undirected multigraph).  This walks an arbitrary
-    edge set; the boundary of a set of faces is walked by `cutting.boundary_loops`.
-    """
-    nbr: dict[int, list[int]] = {}
-    for u, v in np.asarray(edges).tolist():
-        nbr.setdefault(u, []).append(v)
-        nbr.setdefault(v, []).append(u)
-    odd = [k for k, v in nbr.items() if len(v) % 2 == 1]
-    if len(odd) not in (0, 2) or not nbr:
-        return None, False
-    closed = not odd
-    path = _euler_walk(nbr, min(nbr) if closed else min(odd))
-    if len(path) != len(edges) + 1:
-        return None, False
-    order = np.array(path[::-1], dtype=np.int64)
-    return (order[:-1] if closed else order), closed
-
-
-def _euler_walk(nbr: dict[int, list[int]], start: int) -> list[int]:
-    """Hierholzer's walk from ``start`` using every edge of the adjacency lists once (reversed)."""
-    adj = {k: list(v) for k, v in nbr.items()}
-    stack, path = [start], []
-    while stack:
-        u = stack[-1]
-        if adj[u]:
-            v = adj[u].pop()
-            adj[v].remove(u)
-            stack.append(v)
-        else:
-            path.append(stack.pop())
-    return path
 
 
 def turning_per_mm(V: np.ndarray, edges: np.ndarray, normals: np.ndarray | None = None) -> tuple[float, float]:
