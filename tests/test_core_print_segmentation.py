@@ -62,11 +62,11 @@ def test_abcut_balances_areas_where_ratiocut_does_not():
     for lab in (ab, rc):
         assert lab.max() + 1 == 2
         _assert_parts_edge_connected(t, lab)
-    assert area_balance(ab, t.areas) < 1.2
-    assert area_balance(rc, t.areas) > 2.0
+    assert area_balance(ab, t.areas) < 1.18  # 1.022 measured
+    assert 2.36 < area_balance(rc, t.areas) < 3.19  # 2.776 measured
     assert area_balance(ab, t.areas) < area_balance(rc, t.areas)
     # RatioCut's parts have nearly equal face counts instead
-    assert np.bincount(rc).max() / np.bincount(rc).min() < 1.3
+    assert np.bincount(rc).max() / np.bincount(rc).min() < 1.16  # 1.006 measured
 
 
 @pytest.mark.parametrize("method", ["abcut", "ratiocut"])

@@ -78,11 +78,11 @@ def test_cut_runs_along_the_junction_of_sheet_and_dome():
     V, F, geo = sheet_with_dome(R=30.0, R_out=60.0, n_sheet=20, n_dome=20, na=64)
     seg = segment(V, F, 2, eta=5.0, smoothing_mm=3.0, rng=0)
     border = _border_vertices(F, seg.face_labels)
-    assert border.sum() >= 64
-    assert np.abs(geo[border]).max() < 5.0  # mm from the junction circle (dome radius 30 mm)
+    assert 109 <= border.sum() <= 147  # 128 measured (two rings of 64)
+    assert np.abs(geo[border]).max() < 2.71  # mm from the junction circle (dome radius 30 mm; 2.36 measured)
     # plain spectral clustering (eta = 0) cuts elsewhere: the test is not trivially true
     plain = segment(V, F, 2, eta=0.0, smoothing_mm=3.0, rng=0)
-    assert np.abs(geo[_border_vertices(F, plain.face_labels)]).mean() > 10.0
+    assert np.abs(geo[_border_vertices(F, plain.face_labels)]).mean() > 17.3  # 20.4 mm measured
     # and each patch flattens better than the whole (Table 4-1)
     assert max(p.sum_varpi for p in seg.patches) < seg.analysis.sum_varpi
 
