@@ -5,7 +5,7 @@
   fully (eq. 3-31);
 - the angle deficit / excess of a patch (eq. 4-1).
 
-One implementation (`triangle_errors` + `_ratios`) serves triangles
+One implementation (`_triangle_errors` + `_ratios`) serves triangles
 (`length_area_errors`) and polygons fanned from their first corner (`polygon_errors`,
 `polygon_area_error`).  No scale is fitted: the pattern is measured as it is.
 """
@@ -17,7 +17,7 @@ from .errors import BolusError
 from .overlap import signed_areas
 from .topology import MeshTopology, check_mesh, face_areas, triangulate_polygons, zero_area_mask
 
-__all__ = ["length_area_errors", "check_positions", "triangle_errors", "polygon_errors", "polygon_area_error", "curvature_sums"]
+__all__ = ["length_area_errors", "check_positions", "polygon_errors", "polygon_area_error", "curvature_sums"]
 
 
 def _edge_lengths3(P: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -25,7 +25,7 @@ def _edge_lengths3(P: np.ndarray, F: np.ndarray) -> np.ndarray:
     return np.stack([np.linalg.norm(P[F[:, k]] - P[F[:, (k + 1) % 3]], axis=1) for k in range(3)], 1)
 
 
-def triangle_errors(V: np.ndarray, F: np.ndarray, P: np.ndarray, Fp: np.ndarray | None = None):
+def _triangle_errors(V: np.ndarray, F: np.ndarray, P: np.ndarray, Fp: np.ndarray | None = None):
     """Per-triangle lengths and areas of a pattern and its source.
 
     Parameters: V (n,3) source vertices, F (m,3) source triangles, P (k,2 or more) pattern
@@ -39,7 +39,7 @@ def triangle_errors(V: np.ndarray, F: np.ndarray, P: np.ndarray, Fp: np.ndarray 
 
 
 def _ratios(L0, L, A0, A) -> tuple[float, float]:
-    """(EL, EA) of eqs. 3-30, 3-31 from the arrays of `triangle_errors` (any selection)."""
+    """(EL, EA) of eqs. 3-30, 3-31 from the arrays of `_triangle_errors` (any selection)."""
     return float(np.abs(L - L0).sum() / L0.sum()), float(np.abs(A - A0).sum() / A0.sum())
 
 
@@ -70,7 +70,7 @@ def length_area_errors(V, F, UV) -> tuple[float, float]:
     """
     V, F = check_mesh(V, F, "the mesh", nondegenerate=False, min_faces=0)
     UV = check_positions(UV, len(V), "the pattern")
-    L0, L, A0, A = triangle_errors(V, F, UV)
+    L0, L, A0, A = _triangle_errors(V, F, UV)
     if not L0.sum() > 0 or not A0.sum() > 0:
         raise BolusError(f"the mesh ({len(F)} triangles) has no area to measure the pattern against")
     return _ratios(L0, L, A0, A)
@@ -85,7 +85,7 @@ def _fanned(V_src, corners_src, V_pat, corners_pat, sizes):
     P = check_positions(P, len(P), "the pattern")
     if len(Fp) and (Fp.min() < 0 or Fp.max() >= len(P)):
         raise BolusError(f"a pattern polygon refers to a vertex outside the pattern ({len(P)} vertices)")
-    return (tri_poly, *triangle_errors(V_src, Fs, P, Fp))
+    return (tri_poly, *_triangle_errors(V_src, Fs, P, Fp))
 
 
 def polygon_errors(V_src, corners_src, V_pat, corners_pat, sizes, groups=None) -> dict:

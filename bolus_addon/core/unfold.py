@@ -33,7 +33,15 @@ from .assemble import Pattern, assemble_pattern
 from .cutting import cut_to_disk
 from .errors import BolusError
 from .initial_unfolding import _conformal, _greedy, conformal_unfolding, initial_unfolding
-from .measures import _curvature_sums, _ratios, curvature_sums, length_area_errors, polygon_area_error, polygon_errors, triangle_errors
+from .measures import (
+    _curvature_sums,
+    _ratios,
+    _triangle_errors,
+    curvature_sums,
+    length_area_errors,
+    polygon_area_error,
+    polygon_errors,
+)
 from .overlap import boundary_self_intersections, overlapping_faces, signed_areas
 from .overlap_correction import (
     FLIP_ROUNDS,
@@ -50,7 +58,15 @@ from .overlap_correction import (
 from .refine import refine_lengths_l1
 from .relax import STOP_EVERY, relax_explicit, relax_lbfgs
 from .saliency import lumped_mass
-from .springs import CONTOUR_WINDOW, Springs, _build_springs, area_terms, build_springs, spring_energy, stiffness_laplacian
+from .springs import (
+    CONTOUR_WINDOW,
+    Springs,
+    _build_springs,
+    area_terms,
+    build_springs,
+    spring_energy,
+    stiffness_laplacian,
+)
 from .topology import MeshTopology, check_mesh, submesh
 
 __all__ = [
@@ -165,7 +181,7 @@ class _Run:
         return int(np.count_nonzero(signed_areas(UV, self.topo.F) <= 0))
 
     def errors(self, UV) -> tuple[float, float]:
-        return _ratios(*triangle_errors(self.topo.V, self.topo.F, UV))
+        return _ratios(*_triangle_errors(self.topo.V, self.topo.F, UV))
 
 
 def _check_patch(V, F, method: str, start: str) -> tuple[np.ndarray, np.ndarray, MeshTopology]:
