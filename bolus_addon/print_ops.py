@@ -3,7 +3,7 @@
 They read the region, call the core and write back: `print_segment` the face attribute
 ``bolus_print_part`` (core.print_segmentation, 6.2); `orient_parts` one object per part,
 ``<name>_part_<i>``, its polygons in world coordinates, the rotation to its build
-direction and the plate layout in its transform (core.print_orientation.orient_print_parts,
+direction and the plate layout in its transform (core.print_parts.orient_print_parts,
 core.layout.plate_layout), the figures as custom properties and a table on the source;
 `export_parts` one binary STL per part in mm, each at the origin on z = 0.
 """
@@ -24,9 +24,9 @@ from .compat import stl_export as _stl_export  # version differences live in com
 from .core.colormap import categorical_linear_rgba
 from .core.errors import BolusError
 from .core.layout import centre_on_plate, plate_layout
-from .core.print_measures import open_surface_note
 from .core.pattern_mesh import pattern_polygons
-from .core.print_orientation import CRITICAL_ANGLE_DEG, PrintPlan, orient_print_parts, overhang_faces
+from .core.print_measures import CRITICAL_ANGLE_DEG, open_surface_note, overhang_faces
+from .core.print_parts import PrintPlan, orient_print_parts
 from .core.print_segmentation import print_segmentation
 from .operators import BolusOperator
 from .pattern_ops import _new_mesh, _polygon_corners  # Blender-side mesh building, shared

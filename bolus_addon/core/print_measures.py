@@ -199,25 +199,6 @@ class PrintTerms:
         A = topo.areas
         return cls(A, topo.face_normals, A[:, None] * C, hull_points(topo.V[topo.used_vertices] - origin))
 
-    def binned(self, bin_of: np.ndarray, nbins: int) -> "PrintTerms":
-        """Screening model in float32: faces pooled by normal bin (bin_of (q,) in 0..nbins-1) when
-        there are more than 2 nbins faces, and the plate taken over the lowest points in
-        max(64, nbins / 2) directions only (approximate)."""
-        H = self.H
-        nh = max(64, nbins // 2)
-        if len(H) > nh:
-            H = H[np.unique(np.argmin(fibonacci_sphere(nh) @ H.T, axis=1))]
-        if len(self.A) <= 2 * nbins:
-            return PrintTerms(self.A, self.N, self.P, H).astype(np.float32)
-        A = np.bincount(bin_of, weights=self.A, minlength=nbins)
-        a = np.stack([np.bincount(bin_of, weights=self.A * self.N[:, k], minlength=nbins) for k in range(3)], 1)
-        P = np.stack([np.bincount(bin_of, weights=self.P[:, k], minlength=nbins) for k in range(3)], 1)
-        keep = A > 0
-        A, a, P = A[keep], a[keep], P[keep]
-        ln = np.linalg.norm(a, axis=1, keepdims=True)
-        N = np.divide(a, ln, out=np.zeros_like(a), where=ln > 0)
-        return PrintTerms(A, N, P, H).astype(np.float32)
-
     def astype(self, dtype) -> "PrintTerms":
         return PrintTerms(*(x.astype(dtype) for x in (self.A, self.N, self.P, self.H)))
 

@@ -34,8 +34,8 @@ side): only directions with b . favour >= ``favour_min_cos`` are allowed (defaul
 the favoured side never looks down).  A hard constraint, not a penalty, so WQ/WU keep
 their meaning.
 
-`orient_print_parts` orients the whole model and every labelled part (the seed's
-Tables 6-1, 6-2); `place_on_plate` / `rotation_to_z` turn a part to its direction.
+`place_on_plate` / `rotation_to_z` turn a part to its direction; orienting every part
+of a model (`orient_print_parts`, the seed's Tables 6-1, 6-2) lives in print_parts.py.
 The measures and normal curvature live in print_measures.py and curvature.py; this
 module re-exports their public names.
 """
@@ -294,13 +294,33 @@ class _Screened:
         return self.B[self.n_fib:]
 
 
+def _screening_model(exact: PrintTerms, bin_of: np.ndarray, nbins: int) -> PrintTerms:
+    """Step 1's reduced model in float32: faces pooled by normal bin (bin_of (q,) in 0..nbins-1)
+    when there are more than 2 nbins faces (each bin keeps its area, area vector and first
+    moment), the plate over the lowest points in max(64, nbins / 2) directions only."""
+    H = exact.H
+    nh = max(64, nbins // 2)
+    if len(H) > nh:
+        H = H[np.unique(np.argmin(fibonacci_sphere(nh) @ H.T, axis=1))]
+    if len(exact.A) <= 2 * nbins:
+        return PrintTerms(exact.A, exact.N, exact.P, H).astype(np.float32)
+    A = np.bincount(bin_of, weights=exact.A, minlength=nbins)
+    a = np.stack([np.bincount(bin_of, weights=exact.A * exact.N[:, k], minlength=nbins) for k in range(3)], 1)
+    P = np.stack([np.bincount(bin_of, weights=exact.P[:, k], minlength=nbins) for k in range(3)], 1)
+    keep = A > 0
+    A, a, P = A[keep], a[keep], P[keep]
+    ln = np.linalg.norm(a, axis=1, keepdims=True)
+    N = np.divide(a, ln, out=np.zeros_like(a), where=ln > 0)
+    return PrintTerms(A, N, P, H).astype(np.float32)
+
+
 def _screen(topo: MeshTopology, s: _Search, n_directions: int, rng) -> _Screened:
     """Step 1: the objective of many directions on the binned float32 model (module doc)."""
     from scipy.spatial import cKDTree
 
     nbins = int(np.clip(topo.m // FACES_PER_BIN, BINS_MIN, BINS_MAX))
     _, bin_of = cKDTree(fibonacci_sphere(nbins)).query(topo.face_normals)
-    coarse = s.exact.binned(bin_of, nbins)
+    coarse = _screening_model(s.exact, bin_of, nbins)
     Bfib = fibonacci_sphere(n_directions) @ _random_rotation(rng).T
     B = np.concatenate([Bfib, _special_directions(topo, bin_of, nbins, s.fav)])
     ok = s.allowed(B)
@@ -410,115 +430,13 @@ def orient(
                        s.evaluations + 1, int(np.isfinite(sc.f).sum()), Bc[sel])
 
 
-# ------------------------------------------------------------------ parts of a model
+_PARTS = ("PartRow", "PrintPlan", "orient_parts", "orient_print_parts", "skin_side_up_direction")
 
 
-def skin_side_up_direction(V, F, topo: MeshTopology | None = None) -> np.ndarray:
-    """The direction (3,) to favour so that the skin-contact side faces up: minus the
-    area-weighted mean face normal (the skin side is the one the normals point away from).
+def __getattr__(name: str):
+    """The parts of a model live in print_parts.py (which imports this module): re-exported lazily."""
+    if name in _PARTS:
+        from . import print_parts
 
-    BolusError when the normals cancel out (a closed solid has no prevailing side).
-    """
-    topo = check_part(V, F, topo)
-    n = (topo.face_normals * topo.areas[:, None]).sum(axis=0)
-    if np.linalg.norm(n) < 1e-9 * topo.areas.sum():
-        raise BolusError("the surface has no prevailing side (its normals cancel out); untick 'Skin side up'")
-    return -n / np.linalg.norm(n)
-
-
-@dataclass
-class PartRow:
-    """One row of the seed's Tables 6-1, 6-2: a part (or the whole model, part -1) in its best orientation."""
-
-    name: str
-    part: int
-    faces: int
-    area_mm2: float
-    orientation: Orientation
-
-    def as_dict(self) -> dict:
-        o = self.orientation
-        return {"part": self.name, "faces": self.faces, "area_mm2": self.area_mm2,
-                "direction": [float(x) for x in o.direction], "WQ": o.WQ, "WU": o.WU,
-                "support_volume_mm3": o.support_volume, "objective": o.objective}
-
-
-@dataclass
-class PrintPlan:
-    """Result of `orient_print_parts`: the whole model's row (when asked) and one row per part."""
-
-    whole: PartRow | None
-    parts: list[PartRow]
-    warnings: list[str]
-
-    @property
-    def parts_support_mm3(self) -> float:
-        return float(sum(r.orientation.support_volume for r in self.parts))
-
-    @property
-    def support_ratio(self) -> float | None:
-        """Support of the parts together over the whole model's (None without the whole or when it needs none)."""
-        if self.whole is None or not self.whole.orientation.support_volume > 0:
-            return None
-        return self.parts_support_mm3 / self.whole.orientation.support_volume
-
-    def rows(self) -> list[dict]:
-        return [r.as_dict() for r in ([self.whole] if self.whole else []) + self.parts]
-
-
-def _part_labels(labels, m: int) -> np.ndarray:
-    labels = np.asarray(labels)
-    if labels.shape != (m,) or not np.issubdtype(labels.dtype, np.integer):
-        raise BolusError(f"part labels must be one integer per triangle ({m}), got shape {labels.shape}")
-    if not (labels >= 0).any():
-        raise BolusError("no triangle belongs to a print part (every label is negative)")
-    return labels.astype(np.int64)
-
-
-def orient_print_parts(V, F, labels, *, whole: bool = True, skin_side_up: bool = False, progress=None,
-                       topo: MeshTopology | None = None, **kwargs) -> PrintPlan:
-    """`orient` the whole model (if ``whole``) and each part of ``labels`` on its own.
-
-    Parameters: V (n,3) mm, F (m,3) int, labels (m,) int: the part of each triangle,
-    negative for triangles in no part (part numbers need not be consecutive);
-    ``skin_side_up``: favour `skin_side_up_direction` of the whole model for every
-    part; kwargs go to `orient`.  Returns a `PrintPlan` (rows by increasing part number).
-    """
-    report = progress or (lambda f, t: None)
-    topo = MeshTopology(*check_mesh(V, F, "the model", nondegenerate=False)) if topo is None else topo
-    labels = _part_labels(labels, topo.m)
-    if skin_side_up:
-        kwargs["favour"] = skin_side_up_direction(topo.V, topo.F, topo)
-    warnings: list[str] = []
-    whole_row = None
-    if whole:
-        report(0.02, "whole model")
-        whole_row = PartRow("whole", -1, topo.m, float(topo.areas.sum()), orient(topo.V, topo.F, topo=topo, **kwargs))
-    ids = np.unique(labels[labels >= 0])
-    rows = []
-    for k, p in enumerate(ids):
-        report(0.1 + 0.9 * k / len(ids), f"part {p}")
-        Fl, vids = submesh(topo.F, labels == p)
-        sub = MeshTopology(topo.V[vids], Fl)
-        if not sub.areas.sum() > 0:
-            raise BolusError(f"print part {p} has no area (all its faces are degenerate)")
-        if len(Fl) < 4:
-            warnings.append(f"print part {p} has only {len(Fl)} triangles: its orientation is of little use")
-        o = orient(sub.V, Fl, topo=sub, **kwargs)
-        rows.append(PartRow(f"part {p}", int(p), len(Fl), float(sub.areas.sum()), o))
-    report(1.0, "done")
-    return PrintPlan(whole_row, rows, warnings)
-
-
-def orient_parts(V, F, labels, progress=None, **kwargs) -> list[Orientation]:
-    """`orient` each part of ``labels`` (m,) int 0..p-1 on its own -> p Orientations; kwargs go to `orient`."""
-    V, F = check_mesh(V, F, "the model", nondegenerate=False)
-    labels = np.asarray(labels)
-    if labels.shape != (len(F),) or not np.issubdtype(labels.dtype, np.integer) or (labels.size and labels.min() < 0):
-        raise BolusError("part labels must be one non-negative integer per triangle")
-    p = int(labels.max()) + 1 if labels.size else 0
-    missing = np.setdiff1d(np.arange(p), labels)
-    if len(missing):
-        raise BolusError(f"part {missing[0]} has no faces; number the parts 0..{p - 1} without gaps")
-    plan = orient_print_parts(V, F, labels, whole=False, progress=progress, **kwargs)
-    return [r.orientation for r in plan.parts]
+        return getattr(print_parts, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -191,14 +191,7 @@ def print_segmentation(
     Returns a `PrintSegmentation` (labels (m,) 0..p-1 by decreasing area).
     """
     report = progress or (lambda f, t: None)
-    if method not in METHODS:
-        raise BolusError(f"unknown print segmentation method {method!r}; use 'abcut' or 'ratiocut'")
-    try:
-        k = int(parts)
-    except (TypeError, ValueError):
-        raise BolusError(f"the number of parts must be a whole number, got {parts!r}") from None
-    if k != parts or k < 1:
-        raise BolusError(f"ask for at least 1 part (a whole number), got {parts}")
+    k = _check_request(parts, method, min_part_fraction)
     topo = MeshTopology(*check_mesh(V, F, nondegenerate=False, min_faces=0)) if topo is None else topo
     if topo.m == 0:
         raise BolusError("the mesh has no faces; select the faces to split")
@@ -211,23 +204,15 @@ def print_segmentation(
     total = float(topo.areas.sum())
     if not total > 0:
         raise BolusError("the mesh has zero area (all its faces are degenerate); check the mesh")
-    if not 0.0 <= min_part_fraction < 1.0:
-        raise BolusError(f"min_part_fraction must lie in [0, 1), got {min_part_fraction}")
     rng = as_rng(rng)
     m = topo.m
     if k == 1:
         clusters = np.zeros(m, dtype=np.int64)
         vals, U = np.zeros(1), np.full((m, 1), 1.0 / np.sqrt(m))
     else:
-        report(0.1, "dual graph")
-        L = graph_laplacian(dual_graph_weights(topo, eta_quality, eta_support, concave_per_mm))
-        report(0.3, "eigenvectors")
-        if method == "abcut":
-            Lp, s = abcut_laplacian(L, topo.areas)
-            vals, U = smallest_eigenvectors(Lp, k, rng)
-            U = U * s[:, None]  # U' = F^-1/2 U
-        else:
-            vals, U = smallest_eigenvectors(L, k, rng)
+        report(0.1, "dual graph and eigenvectors")
+        W = dual_graph_weights(topo, eta_quality, eta_support, concave_per_mm)
+        vals, U = _embedding(graph_laplacian(W), topo.areas, k, method, rng)
         report(0.7, "clustering")
         # ABcut balances area: every row counts with its face's area; RatioCut counts rows
         weights = topo.areas if method == "abcut" else None
@@ -238,6 +223,30 @@ def print_segmentation(
     labels = connected_patches(topo, clusters, min_area=min_part_fraction * total)
     report(1.0, "done")
     return PrintSegmentation(labels, clusters, vals, U, method, k, min_part_fraction)
+
+
+def _check_request(parts, method: str, min_part_fraction: float) -> int:
+    """The number of parts asked, after checking it, the method and the crumb fraction."""
+    if method not in METHODS:
+        raise BolusError(f"unknown print segmentation method {method!r}; use 'abcut' or 'ratiocut'")
+    try:
+        k = int(parts)
+    except (TypeError, ValueError):
+        raise BolusError(f"the number of parts must be a whole number, got {parts!r}") from None
+    if k != parts or k < 1:
+        raise BolusError(f"ask for at least 1 part (a whole number), got {parts}")
+    if not 0.0 <= min_part_fraction < 1.0:
+        raise BolusError(f"min_part_fraction must lie in [0, 1), got {min_part_fraction}")
+    return k
+
+
+def _embedding(L, areas: np.ndarray, k: int, method: str, rng) -> tuple[np.ndarray, np.ndarray]:
+    """(eigenvalues (k,), embedding (m,k)): U' = F^-1/2 U of L' (ABcut, eq. 6-36) or U of L (RatioCut)."""
+    if method == "abcut":
+        Lp, s = abcut_laplacian(L, areas)
+        vals, U = smallest_eigenvectors(Lp, k, rng)
+        return vals, U * s[:, None]
+    return smallest_eigenvectors(L, k, rng)
 
 
 def print_segment(V, F, parts: int = 3, method: str = "abcut", rng=0, topo: MeshTopology | None = None,

@@ -18,7 +18,8 @@ Pipeline of `segment`:
 3. the k eigenvectors of the smallest eigenvalues (eq. 3-8, the RatioCut relaxation
    of eq. 3-6), by shift-invert Lanczos (`scipy.sparse.linalg.eigsh`) with a start
    vector drawn from ``rng`` so that results are reproducible.
-4. k-means (default) or a Gaussian mixture on the rows of U (n,k).
+4. k-means (default) or a Gaussian mixture on the rows of U (n,k): `clustering.cluster_rows`,
+   the one clustering step (shared with print_segmentation.py).
 5. vertex clusters -> face labels by majority vote of the corners (so a face strip
    along every border carries the shared border vertices: the seed's common
    boundaries of 4.1.2); the triangles of one polygon are kept together.
@@ -319,6 +320,10 @@ def segment(
     smoothing_mm: analysis smoothing for the saliency (see saliency.py);
     face_groups (m,): polygon of each triangle, kept in one patch;
     topo: a `MeshTopology` of (V, F) already built by the caller (saves rebuilding it).
+    Degenerate input: NaN/inf and zero-area triangles (coincident or collinear vertices,
+    no angles for eq. 4-1) are refused by name (`topology.check_mesh`); needle triangles
+    and non-manifold edges are segmented as given (the Blender operator refuses the latter).
+    Returns a `Segmentation` (face_labels (m,) 0..p-1).
     """
     report = progress or (lambda f, t: None)
     # zero-area triangles have no angles (eq. 4-1): refused by name before anything else
