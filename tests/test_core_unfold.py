@@ -1,11 +1,13 @@
-"""Unfolding (seed 3.5, 4.5): developable surfaces exactly, curved ones without flips."""
+"""Unfolding a patch (seed 3.5, 4.5): the pipeline of unfold.py -- developable surfaces exactly,
+curved ones without flips, the stage switches and what each stage earns.  The modules it
+calls have their own tests (test_core_measures, _springs, _relax, _initial_unfolding,
+_overlap_correction, _unfold_degenerate)."""
 import numpy as np
 import pytest
-from meshgen import cone_piece, cylinder_piece, grid, height_field, ring_surface, spherical_cap
+from meshgen import cone_piece, cylinder_piece, grid, ring_surface, spherical_cap
 
 from bolus_addon.core.errors import BolusError
 from bolus_addon.core.overlap import overlapping_faces, signed_areas
-from bolus_addon.core.saliency import lumped_mass
 from bolus_addon.core.topology import MeshTopology
 from bolus_addon.core.unfold import (
     assemble_pattern,
@@ -13,9 +15,6 @@ from bolus_addon.core.unfold import (
     initial_unfolding,
     iter_unfold_patches,
     length_area_errors,
-    relax_explicit,
-    relax_lbfgs,
-    spring_energy,
     unfold_patch,
 )
 
@@ -42,14 +41,6 @@ def test_flat_patch_unfolds_isometrically():
     assert (signed_areas(u.UV, u.F) > 0).all()
 
 
-def test_initial_unfolding_is_exact_on_developable_patch():
-    V, F = cylinder_piece(30.0, np.pi, na=20, nl=12)
-    topo = MeshTopology(V, F)
-    UV = initial_unfolding(topo)  # 4.5.1 alone: central crossing + layers, no relaxation
-    EL, EA = length_area_errors(V, F, UV)
-    assert EL < 1e-9 and EA < 1e-9
-
-
 def test_sixty_degree_cap_has_no_flips_and_bounded_error():
     V, F = spherical_cap(100.0, 60.0, 5)
     u = unfold_patch(V, F)
@@ -65,34 +56,6 @@ def test_length_refinement_lowers_length_error():
     plain = unfold_patch(V, F, refine_rounds=0)
     refined = unfold_patch(V, F, refine_rounds=3)
     assert refined.EL < plain.EL * 0.9
-
-
-def test_spring_gradient_matches_finite_differences():
-    V, F = height_field(lambda x, y: (x**2 - y**2) / 200.0, nx=6, ny=6)
-    topo = MeshTopology(V, F)
-    springs = build_springs(topo, contour_window=4)
-    assert len(springs.contour_rest) > 0 and len(springs.rest) > len(topo.edges)  # crossed + contour
-    x = initial_unfolding(topo).ravel() + np.random.default_rng(0).normal(0, 0.3, 2 * topo.n)
-    e, g = spring_energy(x, springs, topo.n)
-    h = 1e-6
-    for i in np.random.default_rng(1).choice(len(x), 12, replace=False):
-        d = np.zeros_like(x)
-        d[i] = h
-        fd = (spring_energy(x + d, springs, topo.n)[0] - spring_energy(x - d, springs, topo.n)[0]) / (2 * h)
-        assert fd == pytest.approx(g[i], rel=1e-5, abs=1e-7)
-
-
-def test_both_integrators_lower_the_same_energy():
-    V, F = spherical_cap(100.0, 45.0, 3)
-    topo = MeshTopology(V, F)
-    springs = build_springs(topo)
-    UV0 = initial_unfolding(topo)
-    e0, _ = spring_energy(UV0.ravel(), springs, topo.n)
-    masses = lumped_mass(V, F)
-    _, _, e_explicit = relax_explicit(UV0, springs, masses, max_iter=3000)
-    _, _, e_lbfgs = relax_lbfgs(UV0, springs)
-    assert e_lbfgs < e0 and e_explicit < e0
-    assert e_lbfgs <= e_explicit * (1 + 1e-6)  # the minimiser reaches at least as low
 
 
 def test_ring_is_cut_to_a_disk_and_unfolded():
@@ -188,28 +151,6 @@ def test_patches_progress_is_overall_and_weighted_by_size():
     assert all(t.startswith(("patch 1/2: ", "patch 2/2: ")) for _, t in calls)
 
 
-@pytest.fixture
-def ticking_clock(monkeypatch):
-    """relax.py's clock advances 1 s per reading: every iteration is "0.5 s later"."""
-    from types import SimpleNamespace
-
-    import bolus_addon.core.relax as relax_mod
-
-    clock = iter(range(10**6))
-    monkeypatch.setattr(relax_mod, "time", SimpleNamespace(perf_counter=lambda: float(next(clock))))
-
-
-def test_progress_is_reported_inside_long_minimisations(ticking_clock):
-    V, F = spherical_cap(100.0, 60.0, 4)
-    topo = MeshTopology(V, F)
-    springs = build_springs(topo)
-    UV0 = initial_unfolding(topo) * 1.3  # far from rest: many iterations
-    seen = []
-    _, it, _ = relax_lbfgs(UV0, springs, max_iter=30, tol=0.0, progress=seen.append)
-    assert it >= 5 and len(seen) >= it - 2
-    assert all(0 < f <= 1 for f in seen) and seen == sorted(seen)
-
-
 def _pocket(R=6.0, depth=12.0, na=24):
     """A flat sheet with a deep round pocket (a nostril-like cavity): angle excess at the rim,
     deficit at the bottom."""
@@ -229,61 +170,6 @@ def test_pocket_is_hopeless_and_comes_back_without_folds():
     assert u.angle_excess > np.pi and u.angle_deficit > np.pi
     assert u.flipped == 0 and u.overlaps == 0  # the relaxation with the flip penalty does not fold it flat
     assert np.count_nonzero(signed_areas(u.UV, u.F) <= 0) == u.flipped  # the count is the pattern's
-
-
-def test_relaxation_stops_when_asked():
-    V, F = spherical_cap(100.0, 60.0, 3)
-    topo = MeshTopology(V, F)
-    springs = build_springs(topo)
-    UV0 = initial_unfolding(topo) * 1.3
-    asked = []
-    _, it, _ = relax_lbfgs(UV0, springs, max_iter=500, tol=0.0, stop=lambda X, k: asked.append(k) or k >= 50)
-    assert it == 50 and asked == [25, 50]
-
-
-def test_explicit_integrator_reports_progress(ticking_clock):
-    V, F = spherical_cap(100.0, 45.0, 2)
-    topo = MeshTopology(V, F)
-    seen = []
-    relax_explicit(initial_unfolding(topo), build_springs(topo), lumped_mass(V, F), max_iter=1000, tol=0.0,
-                   progress=seen.append)
-    assert len(seen) >= 5 and seen == sorted(seen) and 0 < seen[0] and seen[-1] <= 1
-
-
-def test_a_local_fold_is_untangled_without_a_global_round():
-    from bolus_addon.core.overlap_correction import untangle
-
-    V, F = grid(20, 20)
-    topo = MeshTopology(V, F)
-    UV = V[:, :2].copy()
-    v = 10 * 21 + 10  # an interior vertex pushed far across its neighbours: a fold
-    UV[v] += [12.0, 9.0]
-    assert np.count_nonzero(signed_areas(UV, F) <= 0) > 0
-    X, flips = untangle(UV, topo)
-    assert flips == 0 and np.count_nonzero(signed_areas(X, F) <= 0) == 0
-    far = np.linalg.norm(V[:, :2] - V[v, :2], axis=1) > 30.0
-    np.testing.assert_array_equal(X[far], UV[far])  # only the neighbourhood of the fold moved
-
-
-def test_outline_crossing_is_corrected_locally():
-    """A strip laid on a circle of 1.04 turns: its two ends overlap.  `local_outline` moves
-    only the vertices near the ends apart; the middle of the strip stays exactly in place."""
-    from bolus_addon.core.overlap import boundary_self_intersections
-    from bolus_addon.core.overlap_correction import local_outline
-
-    V, F = grid(60, 3, 60.0)
-    V[:, 1] *= 3.0 / 60.0  # a 60 x 3 mm strip
-    topo = MeshTopology(V, F)
-    theta = V[:, 0] / 60.0 * 2.0 * np.pi * 1.04
-    UV = np.stack([(10.0 + V[:, 1]) * np.cos(theta), (10.0 + V[:, 1]) * np.sin(theta)], 1)
-    if signed_areas(UV, F).sum() < 0:
-        UV[:, 0] = -UV[:, 0]
-    assert len(boundary_self_intersections(UV, F)) and overlapping_faces(UV, F).sum() > 0
-    X, _, crossings = local_outline(UV, build_springs(topo), topo)
-    assert crossings == 0 and len(boundary_self_intersections(X, F)) == 0
-    assert overlapping_faces(X, F).sum() == 0 and np.count_nonzero(signed_areas(X, F) <= 0) == 0
-    middle = np.abs(V[:, 0] - 30.0) < 15.0
-    np.testing.assert_array_equal(X[middle], UV[middle])
 
 
 def test_scanned_nose_patches_unfold_without_overlaps():
@@ -309,44 +195,6 @@ def test_scanned_nose_patches_unfold_without_overlaps():
         assert int(overlapping_faces(u.UV, u.F).sum()) == 0, p["name"]
         el, ea = {"nose p1": (0.0390, 0.0619), "nose p2": (0.0315, 0.0532)}[p["name"]]  # bench, +-15 %
         assert u.EL == pytest.approx(el, rel=0.15) and u.EA == pytest.approx(ea, rel=0.15), (p["name"], u.EL, u.EA)
-
-
-def test_errors_are_relative_to_the_skin_not_the_pattern():
-    """EL and EA divide by the 3D sums (eqs. 3-30, 3-31; SPEC): a pattern at twice the size
-    has every edge 100 % too long and every area 300 % too large (dividing by the pattern's
-    own sums would give 50 % and 75 %)."""
-    from bolus_addon.core.unfold import length_area_errors, polygon_errors
-
-    V, F = grid(6, 6, size=60.0)
-    UV = 2.0 * V[:, :2]
-    EL, EA = length_area_errors(V, F, UV)
-    assert EL == pytest.approx(1.0, rel=1e-12)
-    assert EA == pytest.approx(3.0, rel=1e-12)
-    el, ea, flipped = polygon_errors(V, F.ravel(), UV, F.ravel(), np.full(len(F), 3))[None]
-    assert (el, ea, flipped) == (pytest.approx(1.0, rel=1e-12), pytest.approx(3.0, rel=1e-12), 0)
-
-
-def test_crossed_springs_are_in_the_model_and_earn_their_keep():
-    """Crossed springs (3.5) join the two vertices opposite every interior edge, rest length
-    the pair hinged flat, CROSSED_WEIGHT = 3 times the tension stiffness 1/D; without
-    refinement they lower the length error of a 60 degree cap (3.99 % against 4.06 % with
-    them switched off, measured)."""
-    import bolus_addon.core.springs as springs_mod
-
-    V = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0], [10.0, 10.0, 5.0]])
-    F = np.array([[0, 1, 2], [2, 1, 3]])
-    springs = build_springs(MeshTopology(V, F))
-    assert springs.n_tension == 5 and len(springs.ends) == 6  # five edges, one crossed spring
-    assert sorted(springs.ends[5].tolist()) == [0, 3]
-    hinge = springs_mod._hinge_distance(V, np.array([1]), np.array([2]), np.array([0]), np.array([3]))[0]
-    assert springs.rest[5] == pytest.approx(hinge)
-    assert hinge > np.linalg.norm(V[3] - V[0])  # hinged flat: longer than the 3D chord
-    assert springs_mod.CROSSED_WEIGHT == 3.0
-    assert springs.stiffness[5] == pytest.approx(springs_mod.CROSSED_WEIGHT / hinge)
-    Vc, Fc = spherical_cap(R=100.0, half_angle_deg=60.0, subdivisions=4)
-    with_crossed = unfold_patch(Vc, Fc, refine_rounds=0).EL
-    without = unfold_patch(Vc, Fc, refine_rounds=0, crossed_springs=False).EL
-    assert with_crossed < without - 0.0003
 
 
 def test_coincident_vertices_are_refused_by_name():
@@ -430,32 +278,19 @@ def test_without_relaxation_the_start_comes_back_unchanged(cap_stages):
     assert g.iterations == 0 and 0.045 < g.EL < 0.075  # 4.5.1 alone: EL 6.0 %, EA 11.1 %
 
 
-def test_switched_off_springs_are_left_out_of_the_model():
-    """crossed_springs / disturbing_springs build the model without them (no constant poked)."""
-    V, F = spherical_cap(100.0, 45.0, 2)
-    topo = MeshTopology(V, F)
-    full = build_springs(topo)
-    plain = build_springs(topo, contour_window=0, crossed=False)
-    assert full.n_tension == plain.n_tension == len(plain.ends) == len(topo.edges)
-    assert len(full.ends) > len(topo.edges) and len(full.contour_rest) > 0 and len(plain.contour_rest) == 0
+def test_old_names_are_re_exported_from_their_homes():
+    """Importers of bolus_addon.core.unfold keep working after the split (issue 10): every
+    name in unfold.__all__ is the object of the module that is its one home."""
+    import bolus_addon.core.unfold as unfold
+    from bolus_addon.core import assemble, initial_unfolding, measures, refine, relax, springs
 
-
-def test_contour_windows_follow_the_boundary_in_a_canonical_order():
-    """Disturbing springs (eq. 4-25): every window is CONTOUR_WINDOW consecutive boundary
-    edges (walked by cutting.boundary_loops); the first starts at the lowest boundary edge
-    and runs towards that edge's higher vertex, so the energy's sums (and their rounding,
-    which decides a hopeless nostril patch: EL 26.1 % vs 33.5 %) do not depend on the walker."""
-    from bolus_addon.core.springs import CONTOUR_WINDOW
-
-    V, F = grid(7, 5)
-    topo = MeshTopology(V, F)
-    W = build_springs(topo).contour_edges
-    E = topo.edges
-    nb = int(topo.boundary_edges.sum())
-    assert W.shape == (nb, CONTOUR_WINDOW) and topo.boundary_edges[W].all()
-    assert W[0, 0] == np.nonzero(topo.boundary_edges)[0].min()
-    assert E[W[0, 1]].tolist().count(E[W[0, 0], 1]) == 1  # towards the higher vertex
-    for w in W:  # consecutive edges share a vertex
-        for a, b in zip(w, w[1:]):
-            assert len(set(E[a].tolist()) & set(E[b].tolist())) == 1
-    np.testing.assert_array_equal(W[1:, 0], W[:-1, 1])  # window k+1 starts one edge on
+    homes = {"build_springs": springs, "Springs": springs, "spring_energy": springs, "area_terms": springs,
+             "stiffness_laplacian": springs, "relax_lbfgs": relax, "relax_explicit": relax,
+             "initial_unfolding": initial_unfolding, "conformal_unfolding": initial_unfolding,
+             "refine_lengths_l1": refine, "assemble_pattern": assemble, "Pattern": assemble,
+             "length_area_errors": measures, "polygon_errors": measures, "polygon_area_error": measures,
+             "curvature_sums": measures}
+    for name in unfold.__all__:
+        assert hasattr(unfold, name), name
+        if name in homes:
+            assert getattr(unfold, name) is getattr(homes[name], name), name
