@@ -350,6 +350,14 @@ def test_orient_parts_ict(bpy_addon, scene, capfd):
         assert part["bolus_WQ"] + part["bolus_WU"] <= 1.01 * float((WQ + WU).min())
         supports.append(part["bolus_support_volume_mm3"])
 
+    # laid out on the plate (core.layout.plate_layout): bounding boxes at least 10 mm apart
+    boxes = [(world(bpy.data.objects[n])[:, :2].min(axis=0) * scale, world(bpy.data.objects[n])[:, :2].max(axis=0)
+              * scale) for n in names]
+    for i in range(p):
+        for j in range(i + 1, p):
+            (lo1, hi1), (lo2, hi2) = boxes[i], boxes[j]
+            assert np.maximum(lo2 - hi1, lo1 - hi2).max() >= 10.0 - 1e-3, (i, j, boxes)
+
     table = json.loads(ob["bolus_orient_table"])
     rows = table["rows"]
     assert rows[0]["part"] == "whole" and len(rows) == 1 + p
