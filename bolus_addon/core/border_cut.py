@@ -235,7 +235,7 @@ def _plane_sections(st: CutState, border: Border, d, h: float, limit: float):
     planes = [Vt[2]] if (border.closed or sv[1] >= ARC_PLANARITY * sv[0]) else []
     if not border.closed and d is not None:
         ns = np.cross(Vt[0], d)
-        if np.linalg.norm(ns) > 1e-6:
+        if np.linalg.norm(ns) > 1e-6:  # the border's line is not along the normal (unit vectors)
             planes.append(ns / np.linalg.norm(ns))
     attempts, reasons = [], []
     for nrm in planes:

@@ -36,6 +36,7 @@ SLIVER_DEG = 1.0  #: smallest angle tolerated in a new triangle when snapping ca
 SLIVER_SNAP = 0.25  #: a sliver's cut point snaps to its vertex if within this fraction of the edge
 SNAP_ROUNDS = 12  #: rounds of snapping and re-cutting (each round only moves cut points onto vertices)
 BISECTION_STEPS = 48  #: bisection steps for phi = 0 on an edge (2**-48 of the edge: float precision)
+BAND_SAMPLES = 5  #: points per border edge (ends included) for the distance of a face to the border
 
 
 @dataclass
@@ -348,7 +349,7 @@ def band_faces(st: CutState, topo: MeshTopology, border: Border, all_borders: li
         if (other.a, other.b) != (border.a, border.b):
             continue
         p, q = st.V[other.edges[:, 0]], st.V[other.edges[:, 1]]
-        for s in np.linspace(0.0, 1.0, 5):
+        for s in np.linspace(0.0, 1.0, BAND_SAMPLES):
             samples.append(p + s * (q - p))
             owner.append(np.full(len(p), i))
     pts, own = np.vstack(samples), np.concatenate(owner)
