@@ -470,7 +470,8 @@ def test_zero_area_mesh(bpy_addon, scene, V, op):
     ob = make_object(bpy, np.asarray(V, dtype=float), [[0, 1, 2], [0, 2, 3]], scale_length=0.001)
     assert len(ob.data.polygons) == 2  # validate() kept them
     before = mesh_snapshot(ob.data)
-    with pytest.raises(RuntimeError, match=r"the region has 2 zero-area triangle\(s\), e.g. the triangle on vertices 0, 1, 2"):
+    says = r"the region has 2 zero-area triangle\(s\), e.g. the triangle on vertices 0, 1, 2"
+    with pytest.raises(RuntimeError, match=says):
         getattr(bpy.ops.bolus, op)()
     assert_unchanged(before, mesh_snapshot(ob.data))
     assert part_names(bpy, "skin") == []

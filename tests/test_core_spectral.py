@@ -94,7 +94,8 @@ def test_patch_table_counts():
         sub = F[seg.face_labels == row.patch]
         assert row.faces == len(sub)
         assert row.vertices == len(np.unique(sub))
-        assert row.edges == len(np.unique(np.sort(np.concatenate([sub[:, :2], sub[:, 1:], sub[:, ::2]]), axis=1), axis=0))
+        sides = np.concatenate([sub[:, :2], sub[:, 1:], sub[:, ::2]])
+        assert row.edges == len(np.unique(np.sort(sides, axis=1), axis=0))
         assert row.sum_varpi < seg.analysis.sum_varpi
         assert row.flv == pytest.approx(10 * 0.5**row.sum_varpi)
     assert sum(r.faces for r in seg.patches) == len(F)

@@ -58,7 +58,15 @@ import scipy.sparse as sp
 
 from .errors import BolusError
 from .curvature import normal_curvature
-from .spectral import as_rng, cluster_rows, connected_patches, graph_laplacian, smallest_eigenvectors, vote_groups
+from .spectral import (
+    as_rng,
+    cluster_rows,
+    connected_patches,
+    gaussian_weights,
+    graph_laplacian,
+    smallest_eigenvectors,
+    vote_groups,
+)
 from .topology import MeshTopology, check_mesh
 
 __all__ = [
@@ -74,8 +82,10 @@ __all__ = [
 ]
 
 METHODS = ("abcut", "ratiocut")
-D_CLIP = 3.0
-AREA_FLOOR = 1e-3
+ALIKE_DEG, APART_DEG = 30.0, 60.0  #: q' = 1 under 30 deg between normals, 0.5 under 60, else 0 (seed's 3 levels)
+CONCAVE_PER_MM = 0.02  #: u': a face is concave with a radius of curvature under 50 mm (eq. 6-19's eps)
+MIN_PART_FRACTION = 0.05  #: parts under 5 % of the area are merged: a smaller part is not worth a print
+AREA_FLOOR = 1e-3  #: F^-1/2 of a (nearly) zero-area face uses 1e-3 x the median area: finite, tiny weight
 
 
 def _three_level(ok_i: np.ndarray, ok_j: np.ndarray) -> np.ndarray:
@@ -83,7 +93,7 @@ def _three_level(ok_i: np.ndarray, ok_j: np.ndarray) -> np.ndarray:
 
 
 def dual_graph_weights(
-    topo: MeshTopology, eta_quality: float = 1.0, eta_support: float = 1.0, concave_per_mm: float = 0.02
+    topo: MeshTopology, eta_quality: float = 1.0, eta_support: float = 1.0, concave_per_mm: float = CONCAVE_PER_MM
 ) -> sp.csr_matrix:
     """Weighted adjacency W (m,m) of the triangle dual graph, eqs. 6-21..6-25 (module doc)."""
     for name, val in (("eta_quality", eta_quality), ("eta_support", eta_support)):
@@ -95,13 +105,11 @@ def dual_graph_weights(
     e = np.einsum("ij,ij->i", C[i] - C[j], C[i] - C[j])  # eq. 6-21
     ref = np.percentile(e, 99.0) if e.size else 0.0
     e1 = np.clip(e / ref, 0.0, 1.0) if ref > 0 else np.zeros_like(e)  # eq. 6-25 (scale, see doc)
-    sigma = float(e1.mean()) if e1.size else 1.0
-    sigma = sigma if sigma > 0 else 1.0
-    e1 = np.minimum(e1, D_CLIP * sigma)
-    w = np.exp(-(e1**2) / (2.0 * sigma**2))
+    w = gaussian_weights(e1)  # eq. 6-22's first term, clipped at 3 sigma like eq. 3-4's
     N = topo.face_normals
     cosang = np.einsum("ij,ij->i", N[i], N[j])
-    q = np.where(cosang > np.cos(np.radians(30.0)), 1.0, np.where(cosang > np.cos(np.radians(60.0)), 0.5, 0.0))
+    alike, apart = np.cos(np.radians(ALIKE_DEG)), np.cos(np.radians(APART_DEG))
+    q = np.where(cosang > alike, 1.0, np.where(cosang > apart, 0.5, 0.0))
     w = w + eta_quality * q  # eq. 6-23 (module doc)
     if eta_support > 0:
         convex = ~normal_curvature(topo.V, topo.F, topo).concave(concave_per_mm)
@@ -144,7 +152,7 @@ class PrintSegmentation:
     embedding: np.ndarray  #: (m,k) U' (abcut) or U (ratiocut)
     method: str
     requested: int
-    min_part_fraction: float = 0.05  #: parts below this fraction of the area were merged
+    min_part_fraction: float = MIN_PART_FRACTION  #: parts below this fraction of the area were merged
 
     @property
     def part_count(self) -> int:
@@ -175,8 +183,8 @@ def print_segmentation(
     topo: MeshTopology | None = None,
     eta_quality: float = 1.0,
     eta_support: float = 1.0,
-    concave_per_mm: float = 0.02,
-    min_part_fraction: float = 0.05,
+    concave_per_mm: float = CONCAVE_PER_MM,
+    min_part_fraction: float = MIN_PART_FRACTION,
     clustering: str = "gmm",
     face_groups=None,
     progress=None,

@@ -49,6 +49,7 @@ __all__ = [
     "as_rng",
     "unit_interval",
     "affinity",
+    "gaussian_weights",
     "graph_laplacian",
     "smallest_eigenvectors",
     "cluster_rows",
@@ -61,7 +62,7 @@ __all__ = [
 ]
 
 HIGH_SALIENCY = 0.25
-D_CLIP = 3.0
+D_CLIP = 3.0  #: distances clipped at 3 sigma: every edge weight >= exp(-4.5) ~ 0.011 (see `gaussian_weights`)
 
 
 def as_rng(rng) -> np.random.Generator:
@@ -102,18 +103,26 @@ def affinity(
         s_prime = np.zeros_like(s)
     both_high = (s_prime[E[:, 0]] >= high) & (s_prime[E[:, 1]] >= high)
     d = np.where(both_high, eta, 0.0) * np.abs(s_prime[E[:, 0]] - s_prime[E[:, 1]]) + e_prime
-    sigma = float(d.mean()) if d.size else 1.0
-    if sigma <= 0:
-        sigma = 1.0  # every d_ij is 0 (a perfectly regular mesh): all weights are 1
-    # Our addition: d is clipped at D_CLIP * sigma, i.e. W_ij >= exp(-4.5) ~ 0.011.  The
-    # saliency term still makes a salient edge ~100x cheaper to cut, but it can no longer
-    # cut the graph apart numerically (W ~ 1e-40), which made the eigen-solver return
-    # indicator vectors of a few noisy vertices instead of patches.
-    d = np.minimum(d, D_CLIP * sigma)
-    w = np.exp(-(d**2) / (2.0 * sigma**2))
+    w = gaussian_weights(d)
     n = topo.n
     W = sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])), shape=(n, n))
     return W.tocsr()
+
+
+def gaussian_weights(d: np.ndarray) -> np.ndarray:
+    """Eq. 3-4 (and the first term of eq. 6-22): w = exp(-d^2 / (2 sigma^2)), sigma = mean d, for
+    graph-edge distances d (e,) >= 0 -> (e,).  All weights are 1 when every d is 0.
+
+    Our addition: d is clipped at D_CLIP * sigma, i.e. W_ij >= exp(-4.5) ~ 0.011.  The
+    saliency term still makes a salient edge ~100x cheaper to cut, but it can no longer
+    cut the graph apart numerically (W ~ 1e-40), which made the eigen-solver return
+    indicator vectors of a few noisy vertices instead of patches.
+    """
+    sigma = float(d.mean()) if d.size else 1.0
+    if sigma <= 0:
+        sigma = 1.0
+    d = np.minimum(d, D_CLIP * sigma)
+    return np.exp(-(d**2) / (2.0 * sigma**2))
 
 
 def graph_laplacian(W: sp.spmatrix) -> sp.csr_matrix:
@@ -259,7 +268,8 @@ class PatchStats:
         return dict(self.__dict__)
 
 
-def patch_stats(V_analysis: np.ndarray, F: np.ndarray, labels: np.ndarray, V_true: np.ndarray | None = None) -> list[PatchStats]:
+def patch_stats(V_analysis: np.ndarray, F: np.ndarray, labels: np.ndarray,
+                V_true: np.ndarray | None = None) -> list[PatchStats]:
     """Vertices, edges, faces, area, sum varpi and FLV of every patch (Table 4-1).
 
     Each patch is measured as a mesh of its own (its border vertices are boundary
