@@ -26,7 +26,7 @@ from .core.errors import BolusError
 from .core.layout import centre_on_plate, plate_layout
 from .core.pattern_mesh import pattern_polygons
 from .core.print_measures import CRITICAL_ANGLE_DEG, open_surface_note, overhang_faces
-from .core.print_parts import PrintPlan, orient_print_parts
+from .core.print_parts import PrintPlan, orient_print_parts, row_text
 from .core.print_segmentation import print_segmentation
 from .operators import BolusOperator
 from .pattern_ops import _new_mesh, _polygon_corners  # Blender-side mesh building, shared
@@ -101,13 +101,6 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
         return {"FINISHED"}
 
 
-def format_print_row(r: dict) -> str:
-    d = r["direction"]
-    return (f"{r['part']}: {r['faces']} triangles, {r['area_mm2'] / 100:.1f} cm², build direction "
-            f"({d[0]:+.3f}, {d[1]:+.3f}, {d[2]:+.3f}), WQ {r['WQ']:.1f} mm³, WU {r['WU']:.1f} mm³, "
-            f"support {r['support_volume_mm3']:.1f} mm³")
-
-
 class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
     """Make one object per print part, turned to its best print direction and resting on the plate (seed 6.1, 6.3)"""
 
@@ -135,19 +128,16 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
                                   topo=topo, progress=lambda f, t: self.progress(0.9 * f, t))
         self.progress(0.9, "part objects")
         self._make_part_objects(context, region, tri_labels, plan)
-        rows, ratio = plan.rows(), plan.support_ratio
-        obj[PROP_ORIENT_TABLE] = json.dumps({
-            "layer_mm": self.layer_mm, "critical_angle_deg": CRITICAL_ANGLE_DEG, "skin_side_up": self.skin_side_up,
-            "rows": rows, "parts_support_mm3": plan.parts_support_mm3, "support_ratio": ratio})
+        table = plan.table(layer_mm=self.layer_mm, critical_angle_deg=CRITICAL_ANGLE_DEG,
+                           skin_side_up=self.skin_side_up)
+        obj[PROP_ORIENT_TABLE] = json.dumps(table)
         note = open_surface_note(topo)
         self.warn_all(warnings + plan.warnings)
         self.report({"INFO"}, f"Oriented {len(plan.parts)} print parts of '{obj.name}' (layer {self.layer_mm:g} mm)"
                     + (f"; {note}" if note else ""))
-        for r in rows:
-            self.report({"INFO"}, format_print_row(r))
-        whole_sv = plan.whole.orientation.support_volume
-        self.report({"INFO"}, f"Support of the parts together: {plan.parts_support_mm3:.1f} mm³"
-                    + (f" = {ratio * 100:.0f} % of the whole model's {whole_sv:.1f} mm³" if ratio is not None else ""))
+        for r in table["rows"]:
+            self.report({"INFO"}, row_text(r))
+        self.report({"INFO"}, plan.support_text())
         return {"FINISHED"}
 
     def _make_part_objects(self, context, region, tri_labels, plan: PrintPlan) -> None:

@@ -356,3 +356,27 @@ def test_search_finds_the_narrow_slivers_of_scanned_face_parts():
         assert len(Fl) == faces, "test setup: the segmentation changed; measure the reference again"
         r = orient(V[ids], Fl, rng=0)
         assert r.objective <= 1.01 * reference, (part, r.objective / reference)
+
+
+def test_print_plan_table_and_support_text():
+    V, F, _ = sheet_with_dome(n_sheet=6, n_dome=6, na=24)
+    C = V[F].mean(axis=1)
+    plan = orient_print_parts(V, F, (C[:, 0] > 0).astype(int))
+    t = plan.table(layer_mm=0.2, skin_side_up=False)
+    assert t["layer_mm"] == 0.2 and t["skin_side_up"] is False and t["rows"] == plan.rows()
+    assert t["parts_support_mm3"] == plan.parts_support_mm3 and t["support_ratio"] == plan.support_ratio
+    text = plan.support_text()
+    assert text.startswith(f"Support of the parts together: {plan.parts_support_mm3:.1f} mm³")
+    if plan.support_ratio is not None:
+        assert f"= {plan.support_ratio * 100:.0f} % of the whole model's" in text
+    alone = orient_print_parts(V, F, np.zeros(len(F), int), whole=False)
+    assert alone.support_ratio is None and alone.support_text().endswith("mm³")
+
+
+def test_row_text():
+    from bolus_addon.core.print_parts import row_text
+
+    r = {"part": "part 2", "faces": 12, "area_mm2": 1234.0, "direction": [0.0, -0.6, 0.8], "WQ": 1.25,
+         "WU": 30.0, "support_volume_mm3": 7.04}
+    assert row_text(r) == ("part 2: 12 triangles, 12.3 cm², build direction (+0.000, -0.600, +0.800), "
+                           "WQ 1.2 mm³, WU 30.0 mm³, support 7.0 mm³")

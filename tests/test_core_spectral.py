@@ -237,3 +237,14 @@ def test_segment_on_degenerate_meshes(name):
         return
     with pytest.raises(BolusError, match=says):
         segment(Vd, Fd, 2, rng=0)
+
+
+def test_gaussian_weights_clip_and_regular_mesh():
+    from bolus_addon.core.spectral import gaussian_weights
+
+    d = np.array([0.0, 1.0, 2.0, 100.0])  # sigma = mean = 25.75; 100 > 3 sigma is clipped
+    w = gaussian_weights(d)
+    np.testing.assert_allclose(w[:3], np.exp(-(d[:3] ** 2) / (2 * 25.75**2)))
+    assert w[3] == pytest.approx(np.exp(-4.5))  # the floor: the graph cannot fall apart numerically
+    np.testing.assert_array_equal(gaussian_weights(np.zeros(5)), np.ones(5))
+    assert gaussian_weights(np.zeros(0)).shape == (0,)

@@ -17,7 +17,7 @@ from .print_measures import check_part
 from .print_orientation import Orientation, orient
 from .topology import MeshTopology, check_mesh, submesh
 
-__all__ = ["PartRow", "PrintPlan", "skin_side_up_direction", "orient_print_parts", "orient_parts"]
+__all__ = ["PartRow", "PrintPlan", "skin_side_up_direction", "orient_print_parts", "orient_parts", "row_text"]
 
 
 def skin_side_up_direction(V, F, topo: MeshTopology | None = None) -> np.ndarray:
@@ -71,6 +71,19 @@ class PrintPlan:
 
     def rows(self) -> list[dict]:
         return [r.as_dict() for r in ([self.whole] if self.whole else []) + self.parts]
+
+    def table(self, **settings) -> dict:
+        """JSON-ready: the settings given (layer, ...), the rows, the parts' support and its ratio."""
+        return {**settings, "rows": self.rows(), "parts_support_mm3": self.parts_support_mm3,
+                "support_ratio": self.support_ratio}
+
+    def support_text(self) -> str:
+        """One line: the support of the parts together, and against the whole model's when known."""
+        text = f"Support of the parts together: {self.parts_support_mm3:.1f} mm³"
+        if self.support_ratio is None:
+            return text
+        whole = self.whole.orientation.support_volume
+        return text + f" = {self.support_ratio * 100:.0f} % of the whole model's {whole:.1f} mm³"
 
 
 def _part_labels(labels, m: int) -> np.ndarray:
@@ -129,3 +142,11 @@ def orient_parts(V, F, labels, progress=None, **kwargs) -> list[Orientation]:
         raise BolusError(f"part {missing[0]} has no faces; number the parts 0..{p - 1} without gaps")
     plan = orient_print_parts(V, F, labels, whole=False, progress=progress, **kwargs)
     return [r.orientation for r in plan.parts]
+
+
+def row_text(r: dict) -> str:
+    """One row of `PrintPlan.rows` as a line for the user (areas in cm², volumes in mm³)."""
+    d = r["direction"]
+    return (f"{r['part']}: {r['faces']} triangles, {r['area_mm2'] / 100:.1f} cm², build direction "
+            f"({d[0]:+.3f}, {d[1]:+.3f}, {d[2]:+.3f}), WQ {r['WQ']:.1f} mm³, WU {r['WU']:.1f} mm³, "
+            f"support {r['support_volume_mm3']:.1f} mm³")
