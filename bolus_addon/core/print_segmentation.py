@@ -95,7 +95,8 @@ def _three_level(ok_i: np.ndarray, ok_j: np.ndarray) -> np.ndarray:
 def dual_graph_weights(
     topo: MeshTopology, eta_quality: float = 1.0, eta_support: float = 1.0, concave_per_mm: float = CONCAVE_PER_MM
 ) -> sp.csr_matrix:
-    """Weighted adjacency W (m,m) of the triangle dual graph, eqs. 6-21..6-25 (module doc)."""
+    """Weighted adjacency W (m,m) sparse of the triangle dual graph of ``topo`` (m triangles),
+    eqs. 6-21..6-25 (module doc)."""
     for name, val in (("eta_quality", eta_quality), ("eta_support", eta_support)):
         if not (val >= 0 and np.isfinite(val)):
             raise BolusError(f"{name} must be a non-negative number, got {val}")
@@ -120,7 +121,9 @@ def dual_graph_weights(
 
 
 def abcut_laplacian(L: sp.spmatrix, areas: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
-    """L' = F^-1/2 L F^-1/2 (eq. 6-36) with F = diag(areas) (eq. 6-30); returns (L', F^-1/2 diagonal)."""
+    """L' = F^-1/2 L F^-1/2 (eq. 6-36) with F = diag(areas) (eq. 6-30).
+
+    L (m,m) sparse Laplacian, areas (m,) -> (L' (m,m) sparse symmetric, F^-1/2 diagonal (m,))."""
     a = np.asarray(areas, dtype=np.float64)
     a = np.maximum(a, AREA_FLOOR * float(np.median(a)))
     s = 1.0 / np.sqrt(a)
@@ -264,7 +267,8 @@ def print_segment(V, F, parts: int = 3, method: str = "abcut", rng=0, topo: Mesh
 
 
 def part_stats(V, F, labels, topo: MeshTopology | None = None) -> list[PrintPart]:
-    """Faces, vertices and area (mm^2) of every part of ``labels`` (m,)."""
+    """Faces, vertices and area (mm^2) of every part of ``labels`` (m,) int 0..p-1 on V (n,3), F (m,3)
+    -> p `PrintPart` rows."""
     topo = MeshTopology(V, F) if topo is None else topo
     labels = np.asarray(labels)
     if labels.shape != (topo.m,):
@@ -280,7 +284,8 @@ def part_stats(V, F, labels, topo: MeshTopology | None = None) -> list[PrintPart
 
 
 def area_balance(labels, areas) -> float:
-    """Largest over smallest part area (1 = perfectly balanced; inf if a part is empty)."""
+    """Largest over smallest part area for labels (m,) int 0..p-1 and face areas (m,)
+    (1 = perfectly balanced; inf if a part is empty)."""
     labels = np.asarray(labels)
     a = np.bincount(labels, weights=np.asarray(areas, dtype=np.float64), minlength=int(labels.max()) + 1)
     return float(a.max() / a.min()) if a.min() > 0 else float("inf")
