@@ -308,6 +308,25 @@ class Segmentation:
         return int(self.face_labels.max()) + 1 if self.face_labels.size else 0
 
 
+def _check_segment_request(topo: MeshTopology, patches, face_groups) -> int:
+    """The number of patches asked, after checking that the region can hold them: enough
+    faces and vertices, no loose vertices, one connected piece."""
+    k = int(patches)
+    if k < 1:
+        raise BolusError(f"ask for at least 1 patch, got {patches}")
+    nfaces = len(np.unique(face_groups)) if face_groups is not None else topo.m
+    if nfaces < k:
+        raise BolusError(f"the region has {nfaces} faces, fewer than the {k} patches asked")
+    if topo.n < k:
+        raise BolusError(f"the region has {topo.n} vertices, too few for the {k} patches asked")
+    if not topo.used_vertices.all():
+        raise BolusError("the mesh has vertices that belong to no face (loose vertices)")
+    ncomp, _ = topo.face_components()
+    if ncomp > 1:
+        raise BolusError(f"the region is made of {ncomp} separate parts; segment one connected part at a time")
+    return k
+
+
 def segment(
     V,
     F,
@@ -339,21 +358,7 @@ def segment(
     # zero-area triangles have no angles (eq. 4-1): refused by name before anything else
     topo = MeshTopology(*check_mesh(V, F, "the region")) if topo is None else topo
     topo.require_nondegenerate("the region")
-    k = int(patches)
-    if k < 1:
-        raise BolusError(f"ask for at least 1 patch, got {patches}")
-    nfaces = len(np.unique(face_groups)) if face_groups is not None else topo.m
-    if nfaces < k:
-        raise BolusError(f"the region has {nfaces} faces, fewer than the {k} patches asked")
-    if topo.n < k:
-        raise BolusError(f"the region has {topo.n} vertices, too few for the {k} patches asked")
-    if not topo.used_vertices.all():
-        raise BolusError("the mesh has vertices that belong to no face (loose vertices)")
-    ncomp, _ = topo.face_components()
-    if ncomp > 1:
-        raise BolusError(
-            f"the region is made of {ncomp} separate parts; segment one connected part at a time"
-        )
+    k = _check_segment_request(topo, patches, face_groups)
     report(0.05, "flattenability")
     ana = analyse(topo.V, topo.F, smoothing_mm, topo=topo)
     rng = as_rng(rng)
