@@ -195,7 +195,3 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
 
 classes = (BOLUS_OT_unfold,)
 
-
-# print_ops still imports these two names from here (until it imports mesh_io's)
-_new_mesh = mesh_io.new_mesh
-_polygon_corners = mesh_io.polygon_corners

@@ -29,7 +29,6 @@ from .core.print_measures import CRITICAL_ANGLE_DEG, open_surface_note, overhang
 from .core.print_parts import PrintPlan, orient_print_parts, row_text
 from .core.print_segmentation import print_segmentation
 from .operators import BolusOperator
-from .pattern_ops import _new_mesh, _polygon_corners  # Blender-side mesh building, shared
 from .properties import layer_property, parts_property, print_method_property, seed_property, skin_side_up_property
 
 #: names fixed by SPEC.md
@@ -143,7 +142,7 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
     def _make_part_objects(self, context, region, tri_labels, plan: PrintPlan) -> None:
         """One object per part: its polygons in world units, turned and laid out by `plate_layout`."""
         obj, scale = region.obj, region.mm_per_unit
-        loop_start, loop_total, loop_vert = _polygon_corners(region.mesh)
+        loop_start, loop_total, loop_vert = mesh_io.polygon_corners(region.mesh)
         polys = [pattern_polygons(region.tri_poly, np.where(tri_labels == r.part, 0, -1), region.F, region.F,
                                   region.vert_ids, loop_start, loop_total, loop_vert) for r in plan.parts]
         used = [np.unique(pp.corner_src, return_inverse=True) for pp in polys]
@@ -153,7 +152,7 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
         collection = obj.users_collection[0] if obj.users_collection else context.scene.collection
         for r, pp, (u, corners), (R, t) in zip(plan.parts, polys, used, place):
             name = f"{obj.name}{PART_INFIX}{r.part}"
-            pme = _new_mesh(name, region.V[u] / scale, corners.reshape(-1), pp.loop_starts)
+            pme = mesh_io.new_mesh(name, region.V[u] / scale, corners.reshape(-1), pp.loop_starts)
             pob = bpy.data.objects.new(name, pme)
             collection.objects.link(pob)
             T = np.eye(4)
