@@ -2,7 +2,7 @@
 
 Run from the repository root:
 
-    .venv/bin/python bench/unfold_bench.py            # full run (about 3-5 minutes)
+    .venv/bin/python bench/unfold_bench.py            # full run (about 12 minutes on 2 quiet cores)
     .venv/bin/python bench/unfold_bench.py --quick    # smaller caps, no explicit integrator
     .venv/bin/python bench/unfold_bench.py --json out/unfold_bench.json
     .venv/bin/python bench/unfold_bench.py --quick --only "nose p1" --only nostril   # some patches only
