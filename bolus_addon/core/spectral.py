@@ -40,7 +40,7 @@ from scipy.sparse.linalg import eigsh
 from .clustering import cluster_rows  # re-exported: the one clustering step (clustering.py)
 from .errors import BolusError
 from .saliency import SaliencyResult, analyse, corner_angle_sums, flattenability, flattenability_value
-from .topology import MeshTopology, check_mesh, submesh  # submesh: re-exported (it lived here)
+from .topology import MeshTopology, submesh  # submesh: re-exported (it lived here)
 
 __all__ = [
     "HIGH_SALIENCY",
@@ -350,13 +350,13 @@ def segment(
     face_groups (m,): polygon of each triangle, kept in one patch;
     topo: a `MeshTopology` of (V, F) already built by the caller (saves rebuilding it).
     Degenerate input: NaN/inf and zero-area triangles (coincident or collinear vertices,
-    no angles for eq. 4-1) are refused by name (`topology.check_mesh`); needle triangles
+    no angles for eq. 4-1) are refused by name (`MeshTopology.require_nondegenerate`); needle triangles
     and non-manifold edges are segmented as given (the Blender operator refuses the latter).
     Returns a `Segmentation` (face_labels (m,) 0..p-1).
     """
     report = progress or (lambda f, t: None)
     # zero-area triangles have no angles (eq. 4-1): refused by name before anything else
-    topo = MeshTopology(*check_mesh(V, F, "the region")) if topo is None else topo
+    topo = MeshTopology(V, F) if topo is None else topo  # NaN/inf and bad indices refused here
     topo.require_nondegenerate("the region")
     k = _check_segment_request(topo, patches, face_groups)
     report(0.05, "flattenability")

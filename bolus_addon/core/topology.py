@@ -472,4 +472,10 @@ class MeshTopology:
 
     def degenerate_faces(self, rel_tol: float = ZERO_AREA_REL) -> np.ndarray:
         """(m,) bool: triangles whose area is below rel_tol * (median edge length)^2."""
+        if rel_tol == ZERO_AREA_REL:
+            return self._zero_area
         return zero_area_mask(self.areas, self.edge_lengths, rel_tol)
+
+    @cached_property
+    def _zero_area(self) -> np.ndarray:
+        return zero_area_mask(self.areas, self.edge_lengths)
