@@ -274,16 +274,10 @@ def maxrss_kb() -> int:
 
 
 def clean_scene(bpy) -> None:
-    if bpy.context.object is not None and bpy.context.object.mode != "OBJECT":
-        bpy.ops.object.mode_set(mode="OBJECT")
-    for ob in list(bpy.data.objects):
-        bpy.data.objects.remove(ob, do_unlink=True)
-    for me in list(bpy.data.meshes):
-        bpy.data.meshes.remove(me)
-    for mat in list(bpy.data.materials):
-        if mat.users == 0:
-            bpy.data.materials.remove(mat)
-    gc.collect()
+    """An empty scene (tests/blender_scene.py, shared with the tests' fixture)."""
+    from blender_scene import empty_scene
+
+    empty_scene(bpy)
 
 
 def timed_uv_operator(bpy, ob, op, what: str, **kw) -> tuple[float, int, list[str]]:

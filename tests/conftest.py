@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from blender_scene import empty_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 ASSETS = ROOT / "assets"
@@ -54,14 +55,7 @@ def bpy_addon():
 @pytest.fixture
 def scene(bpy_addon):
     """An empty scene with the default unit scale (1 unit = 1 m)."""
-    bpy = bpy_addon
-    if bpy.context.object is not None and bpy.context.object.mode != "OBJECT":
-        bpy.ops.object.mode_set(mode="OBJECT")
-    for ob in list(bpy.data.objects):
-        bpy.data.objects.remove(ob, do_unlink=True)
-    for me in list(bpy.data.meshes):
-        bpy.data.meshes.remove(me)
-    sc = bpy.context.scene
+    sc = empty_scene(bpy_addon)
     sc.unit_settings.system = "METRIC"
     sc.unit_settings.scale_length = 1.0
     return sc
