@@ -17,8 +17,8 @@ screenshot its own UI in background mode, so there is no picture of the panel it
     4_pattern_svg.png          Export Pattern (SVG): the file's paths, lines and texts drawn
                                in Blender (solid cut lines, dashed 5 mm seam allowance, 50 mm bar)
     5_print_parts.png          Split into Print Parts (the parts on the face, close-up)
-                               | Orient Print Parts: the parts on the build plate, faces
-                               that need support in red
+                               | Orient Print Parts: the parts on the build plate (spread
+                               in a row for the picture), faces that need support in red
 
 Every picture is 800 px wide, RGB, rendered without dithering and with the Standard view
 transform (the colours are the colour maps' own), written by a small PNG writer (64 levels
@@ -226,6 +226,21 @@ def render_svg(svg_path: Path, out: Path) -> None:
         ob.hide_render = False
 
 
+def spread_along_x(parts: list, gap_mm: float = 10.0) -> None:
+    """Shift the placed parts (on z = 0, turned as orient_parts left them) into one row
+    along x, `gap_mm` apart, so that the front view shows each of them (orient_parts packs
+    the footprints on the plate, which may put one behind the other); picture only."""
+    from mathutils import Matrix
+
+    x = 0.0
+    for ob in parts:
+        co = np.array([ob.matrix_world @ v.co for v in ob.data.vertices])
+        lo, hi = co.min(axis=0), co.max(axis=0)
+        shift = (x - lo[0], -(lo[1] + hi[1]) / 2, 0.0)
+        ob.matrix_world = Matrix.Translation(shift) @ ob.matrix_world
+        x += hi[0] - lo[0] + gap_mm
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default=str(ROOT / "docs" / "img"), help="folder for the PNGs (created)")
@@ -285,7 +300,11 @@ def main():
     demo.render_closeup(obj, "bolus_print_part_color", tmp / "split.png")
     for ob in (pattern, *parts):
         ob.hide_render = False
+    placed = [ob.matrix_world.copy() for ob in parts]
+    spread_along_x(parts)
     demo.render_parts([obj, pattern], parts, tmp / "parts.png")
+    for ob, m in zip(parts, placed):
+        ob.matrix_world = m
     side_by_side([tmp / "split.png", tmp / "parts.png"], out / "5_print_parts.png")
 
     table = json.loads(pattern["bolus_pattern_table"])
