@@ -40,25 +40,7 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
     bl_label = "Smooth Cut Lines"
 
     def run(self, context):
-        # the region is the patch faces (bolus_patch >= 0), whatever is selected: every check
-        # (NaN, units, manifold, zero area) is on them only
-        obj = mesh_io.active_mesh_object(context)
-        me = obj.data
-        if me.shape_keys is not None:
-            raise BolusError(
-                f"'{obj.name}' has shape keys; cutting would have to re-shape every key: apply or remove them first"
-            )
-        poly_labels = mesh_io.read_face_labels(obj, ATTR_PATCH)  # safe in Edit Mode
-        if poly_labels is None:
-            raise BolusError(f"'{obj.name}' has no '{ATTR_PATCH}' attribute: run Segment into Patches first")
-        if not (poly_labels >= 0).any():
-            raise BolusError(f"no face of '{obj.name}' belongs to a patch: run Segment into Patches first")
-        # The core also gets the faces just outside the patches (label -1, never split): a
-        # cut that reaches the edge of the region then snaps to a vertex there instead of
-        # splitting an edge that a face outside the region shares (a T-junction, a crack).
-        patch = poly_labels >= 0
-        region = mesh_io.read_region(context, obj, polys=patch | mesh_io.polygons_next_to(me, patch))
-        labels = poly_labels[region.tri_poly]
+        obj, region, labels = _read_patches(context)
         checked, why = cut_region_check(region.V, region.F, labels, region.vert_ids)  # on the patch faces only
         warnings = region.warnings + checked
         if why:
@@ -66,12 +48,9 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
             self.report({"INFO"}, f"Nothing to smooth on '{obj.name}': {why} (Segment into Patches with 2 or more "
                                   "patches makes borders to smooth); the mesh was not changed")
             return {"FINISHED"}
-        smoothing = 0.0
-        if PROP_PATCH_TABLE in obj:
-            try:
-                smoothing = float(json.loads(obj[PROP_PATCH_TABLE]).get("smoothing_mm", 0.0))
-            except (ValueError, TypeError, AttributeError):
-                smoothing = 0.0
+        table = mesh_io.json_prop(obj, PROP_PATCH_TABLE)
+        table = table if isinstance(table, dict) else {}
+        smoothing = float(table.get("smoothing_mm", 0.0) or 0.0)
         self.progress(0.05, "smooth cut lines")
         res = smooth_cuts(region.V, region.F, labels, progress=lambda f, t: self.progress(0.05 + 0.75 * f, t))
         borders = [b.as_dict() for b in res.borders]
@@ -85,25 +64,19 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
         self.progress(0.8, "patch figures")
         before = patch_table(region.V, region.F, labels, smoothing)
         after = patch_table(res.V, res.F, res.labels, smoothing)
-        with mesh_io.object_mode(obj):
-            new_labels = mesh_cuts.apply_cuts(me, region, res, ATTR_PATCH)
-            seams = mesh_io.polygon_edge_labels(me, new_labels)
-            touched = mesh_io.edges_of_polygons(me, np.nonzero(new_labels >= 0)[0])
-            mesh_io.set_seams(me, seams, touched)
-            mesh_io.write_face_colors(me, ATTR_PATCH_COLOR, categorical_linear_rgba(new_labels))
-            me.update()
-        try:
-            table = json.loads(obj[PROP_PATCH_TABLE]) if PROP_PATCH_TABLE in obj else {}
-        except (ValueError, TypeError):
-            table = {}
+        _write_cuts(obj, region, res)
         table.update({"patches": after, "before_smooth_cuts": before, "smooth_cuts": True})
         obj[PROP_PATCH_TABLE] = json.dumps(table)
         obj[PROP_CUT_TABLE] = json.dumps(borders)
         self.warn_all(warnings)
+        self.report_cuts(obj, res, before, after)
+        return {"FINISHED"}
+
+    def report_cuts(self, obj, res, before, after) -> None:
         changed = sum(b.method != "unchanged" for b in res.borders)
         self.report(
             {"INFO"},
-            f"Smoothed {changed} of {len(borders)} borders of '{obj.name}': {res.new_vertex_count} new vertices, "
+            f"Smoothed {changed} of {len(res.borders)} borders of '{obj.name}': {res.new_vertex_count} new vertices, "
             f"{int(res.split.sum())} triangles split",
         )
         for b in res.borders:  # each border once: one that could not be smoothed is a warning
@@ -115,7 +88,40 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
                 f"{a_row['edges']}, triangles {b_row['faces']} -> {a_row['faces']}, sum varpi {b_row['sum_varpi']:.4f} -> "
                 f"{a_row['sum_varpi']:.4f}, FLV {b_row['flv']:.4g} -> {a_row['flv']:.4g}",
             )
-        return {"FINISHED"}
+
+
+def _read_patches(context):
+    """(object, region, triangle labels): the patch faces (bolus_patch >= 0), whatever is
+    selected, so every check (NaN, units, manifold, zero area) is on them only, plus the
+    faces just outside them (label -1, never split): a cut that reaches the edge of the
+    region then snaps to a vertex there instead of splitting an edge that a face outside
+    the region shares (a T-junction, a crack)."""
+    obj = mesh_io.active_mesh_object(context)
+    me = obj.data
+    if me.shape_keys is not None:
+        raise BolusError(
+            f"'{obj.name}' has shape keys; cutting would have to re-shape every key: apply or remove them first"
+        )
+    poly_labels = mesh_io.read_face_labels(obj, ATTR_PATCH)  # safe in Edit Mode
+    if poly_labels is None:
+        raise BolusError(f"'{obj.name}' has no '{ATTR_PATCH}' attribute: run Segment into Patches first")
+    if not (poly_labels >= 0).any():
+        raise BolusError(f"no face of '{obj.name}' belongs to a patch: run Segment into Patches first")
+    patch = poly_labels >= 0
+    region = mesh_io.read_region(context, obj, polys=patch | mesh_io.polygons_next_to(me, patch))
+    return obj, region, poly_labels[region.tri_poly]
+
+
+def _write_cuts(obj, region, res) -> None:
+    """The cut into the mesh (mesh_cuts.apply_cuts), then seams and patch colours."""
+    me = obj.data
+    with mesh_io.object_mode(obj):
+        new_labels = mesh_cuts.apply_cuts(me, region, res, ATTR_PATCH)
+        seams = mesh_io.polygon_edge_labels(me, new_labels)
+        touched = mesh_io.edges_of_polygons(me, np.nonzero(new_labels >= 0)[0])
+        mesh_io.set_seams(me, seams, touched)
+        mesh_io.write_face_colors(me, ATTR_PATCH_COLOR, categorical_linear_rgba(new_labels))
+        me.update()
 
 
 classes = (BOLUS_OT_smooth_cuts,)

@@ -10,6 +10,7 @@ mesh is only written when an operator has finished computing.
 from __future__ import annotations
 
 import contextlib
+import json
 from dataclasses import dataclass, field
 
 import bpy
@@ -19,7 +20,7 @@ from .core.errors import BolusError
 from .core.remesh_maps import label_range
 from .core.topology import submesh
 
-__all__ = ["Region", "mm_per_unit", "world_mm", "read_region", "size_warning", "check_finite", "read_face_labels", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "polygons_next_to", "set_seams", "show_colors", "polygon_corners", "new_mesh"]
+__all__ = ["Region", "mm_per_unit", "world_mm", "read_region", "size_warning", "check_finite", "read_face_labels", "object_mode", "write_attribute", "write_point_colors", "write_face_colors", "polygon_edge_labels", "edges_of_polygons", "polygons_next_to", "set_seams", "show_colors", "polygon_corners", "new_mesh", "json_prop"]
 
 
 def mm_per_unit(scene: bpy.types.Scene) -> float:
@@ -139,17 +140,7 @@ def read_region(context, obj: bpy.types.Object | None = None, polys: np.ndarray 
     if units:
         warnings.append(units)
     if not selection_only and polys is None:
-        loose = nv - len(vert_ids)
-        if loose:
-            warnings.append(f"{loose} loose vertices (in no face) were ignored")
-        ne = len(me.edges)
-        if ne:
-            loop_e = get_array(me.loops, "edge_index", len(me.loops), np.int64)
-            edges_in_faces = np.zeros(ne, dtype=bool)
-            edges_in_faces[loop_e] = True
-            nloose = int(ne - edges_in_faces.sum())
-            if nloose:
-                warnings.append(f"{nloose} loose edges (in no face) were ignored")
+        warnings += _loose_warnings(me, len(vert_ids))
     return Region(
         obj=obj,
         V=V,
@@ -162,6 +153,22 @@ def read_region(context, obj: bpy.types.Object | None = None, polys: np.ndarray 
         warnings=warnings,
         tri_index=np.nonzero(keep)[0],
     )
+
+
+def _loose_warnings(me: bpy.types.Mesh, used_vertices: int) -> list[str]:
+    """Warnings for the vertices and edges of the whole mesh that are in no face."""
+    out = []
+    loose = len(me.vertices) - used_vertices
+    if loose:
+        out.append(f"{loose} loose vertices (in no face) were ignored")
+    ne = len(me.edges)
+    if ne:
+        edges_in_faces = np.zeros(ne, dtype=bool)
+        edges_in_faces[get_array(me.loops, "edge_index", len(me.loops), np.int64)] = True
+        nloose = int(ne - edges_in_faces.sum())
+        if nloose:
+            out.append(f"{nloose} loose edges (in no face) were ignored")
+    return out
 
 
 def check_finite(obj: bpy.types.Object, vert_ids: np.ndarray, co: np.ndarray, V: np.ndarray) -> None:
@@ -345,6 +352,17 @@ def new_mesh(name: str, co: np.ndarray, corner_vert: np.ndarray, loop_starts: np
     me.update(calc_edges=True)
     me.validate(clean_customdata=False)
     return me
+
+
+def json_prop(ob, key: str):
+    """The JSON table an operator left in custom property ``key`` of ``ob``, or None (no
+    object, no property, or not readable: callers then show or use no table)."""
+    if ob is None or key not in ob:
+        return None
+    try:
+        return json.loads(ob[key])
+    except (ValueError, TypeError):
+        return None
 
 
 def _edit_owner(me: bpy.types.Mesh) -> bpy.types.Object | None:

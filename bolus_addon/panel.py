@@ -1,8 +1,6 @@
 """Sidebar panel (3D View > Sidebar > Bolus)."""
 from __future__ import annotations
 
-import json
-
 import bpy
 
 from . import mesh_io
@@ -67,14 +65,14 @@ def draw_patches(box, s, obj):
     box.prop(s, "method")
     op = box.operator("bolus.segment", icon="MESH_ICOSPHERE")
     op.patches, op.eta, op.seed, op.smoothing_mm, op.method = s.patches, s.eta, s.seed, s.smoothing_mm, s.method
-    table = json_prop(obj, PROP_PATCH_TABLE)
+    table = mesh_io.json_prop(obj, PROP_PATCH_TABLE)
     table = table.get("patches") if isinstance(table, dict) else None
     if table:
         draw_table(box, ("Patch", "Verts", "Tris", "Σϖ", "FLV"), (
             (str(r["patch"]), str(r["vertices"]), str(r["faces"]), f"{r['sum_varpi']:.2f}", f"{r['flv']:.3g}")
             for r in table))
     box.operator("bolus.smooth_cuts", icon="IPO_EASE_IN_OUT")
-    cuts = json_prop(obj, PROP_CUT_TABLE)
+    cuts = mesh_io.json_prop(obj, PROP_CUT_TABLE)
     if cuts:
         draw_table(box, ("Border", "Cut", "Turn/mm", "Moved"), (
             (f"{r['a']}|{r['b']}", r["method"], f"{r['turning_before']:.2f}→{r['turning_after']:.2f}",
@@ -91,7 +89,7 @@ def draw_pattern(box, s, obj):
     pat = None
     if obj is not None:
         pat = obj if PROP_PATTERN_TABLE in obj else bpy.data.objects.get(obj.name + PATTERN_SUFFIX)
-    t = json_prop(pat, PROP_PATTERN_TABLE)
+    t = mesh_io.json_prop(pat, PROP_PATTERN_TABLE)
     if t:
         box.label(text=f"{pat.name}: EL {t['EL'] * 100:.2f} %  EA {t['EA'] * 100:.2f} %")
         draw_pattern_table(box, t)
@@ -110,7 +108,7 @@ def draw_print(box, s, obj):
     src = obj
     if obj is not None and PROP_PART_SOURCE in obj:
         src = bpy.data.objects.get(obj[PROP_PART_SOURCE], obj)
-    t = json_prop(src, PROP_PRINT_TABLE)
+    t = mesh_io.json_prop(src, PROP_PRINT_TABLE)
     if t and "parts" in t:
         box.label(text=f"{len(t['parts'])} parts, largest/smallest area {t['area_balance']:.2f}")
     row = box.row(align=True)
@@ -118,7 +116,7 @@ def draw_print(box, s, obj):
     row.prop(s, "skin_side_up")
     op = box.operator("bolus.orient_parts", icon="ORIENTATION_GIMBAL")
     op.layer_mm, op.skin_side_up = s.layer_mm, s.skin_side_up
-    t = json_prop(src, PROP_ORIENT_TABLE)
+    t = mesh_io.json_prop(src, PROP_ORIENT_TABLE)
     if t:
         draw_table(box, ("Part", "Tris", "WQ mm³", "WU mm³", "Support"), (
             (r["part"], str(r["faces"]), f"{r['WQ']:.0f}", f"{r['WU']:.0f}", f"{r['support_volume_mm3']:.0f}")
@@ -126,17 +124,6 @@ def draw_print(box, s, obj):
         if t.get("support_ratio") is not None:
             box.label(text=f"Parts' support: {t['support_ratio'] * 100:.0f} % of the whole model's")
     box.operator("bolus.export_parts", icon="EXPORT")
-
-
-def json_prop(ob, key: str):
-    """The JSON table an operator left in custom property ``key`` of ``ob``, or None
-    (no object, no property, or not readable: the panel then shows no table)."""
-    if ob is None or key not in ob:
-        return None
-    try:
-        return json.loads(ob[key])
-    except (ValueError, TypeError):
-        return None
 
 
 class VIEW3D_PT_bolus(bpy.types.Panel):
