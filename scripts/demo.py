@@ -352,11 +352,17 @@ def main():
     print(f"wrote {out}/demo.blend, saliency.png, patches.png, cuts.png, cuts_before.png, cuts_after.png, pattern.png, parts.png, pattern.svg, parts/*.stl, report.json, report.txt")
 
 
-if __name__ == "__main__":
+def run_with_addon(fn) -> None:
+    """fn(), then unregister the add-on: plain bpy 4.2 segfaults and 4.5 hangs at exit
+    while an add-on stays registered."""
     try:
-        main()
-    finally:  # plain bpy 4.2 segfaults and 4.5 hangs at exit while an add-on stays registered
+        fn()
+    finally:
         if hasattr(bpy.types.Scene, "bolus"):
             import bolus_addon
 
             bolus_addon.unregister()
+
+
+if __name__ == "__main__":
+    run_with_addon(main)

@@ -319,10 +319,4 @@ def main():
 
 
 if __name__ == "__main__":
-    try:
-        main()
-    finally:  # plain bpy 4.2 segfaults and 4.5 hangs at exit while an add-on stays registered
-        if hasattr(bpy.types.Scene, "bolus"):
-            import bolus_addon
-
-            bolus_addon.unregister()
+    demo.run_with_addon(main)
