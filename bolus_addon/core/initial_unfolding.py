@@ -26,7 +26,7 @@ from .geometry2d import cross2d
 from .overlap import signed_areas
 from .relax import relax_lbfgs
 from .springs import Springs, sub_springs
-from .topology import MeshTopology, check_mesh
+from .topology import MeshTopology
 
 __all__ = ["initial_unfolding", "conformal_unfolding", "STRIPE_DIRECTIONS"]
 
@@ -42,7 +42,7 @@ PARALLEL_DET = 1e-14  # a stripe line and a triangle edge this close to parallel
 def _require_patch(topo: MeshTopology) -> None:
     """`topology.check_mesh` (zero-area triangles, non-manifold edges), and every vertex in a
     triangle (an unused vertex has no place in the plane: the conformal system is singular)."""
-    check_mesh(topo.V, topo.F, "the patch", manifold=True)
+    topo.require_valid("the patch", manifold=True)
     unused = np.nonzero(~topo.used_vertices)[0]
     if len(unused):
         raise BolusError(f"the patch has {len(unused)} vertex(es) in no triangle, e.g. vertex {int(unused[0])}: "

@@ -133,7 +133,7 @@ def curvature_sums(topo: MeshTopology) -> tuple[float, float]:
     max(0, 2 pi - theta) and max(0, theta - 2 pi), theta the angle sum (eq. 4-1); their
     sum is sum varpi (eq. 4-2).  topo: the patch's `MeshTopology`; `BolusError`
     (`topology.check_mesh`) on zero-area triangles (no angles) and non-manifold edges."""
-    check_mesh(topo.V, topo.F, "the patch", manifold=True)
+    topo.require_valid("the patch", manifold=True)
     return _curvature_sums(topo)
 
 

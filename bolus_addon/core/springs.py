@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .cutting import _edge_ids, boundary_loops
-from .topology import MeshTopology, check_mesh
+from .topology import MeshTopology
 
 __all__ = ["Springs", "build_springs", "spring_energy", "area_terms", "stiffness_laplacian", "sub_springs",
            "CONTOUR_WINDOW", "CROSSED_WEIGHT"]
@@ -138,7 +138,7 @@ def build_springs(topo: MeshTopology, contour_window: int = CONTOUR_WINDOW, cros
     non-manifold edges (no pair of faces for a crossed spring).  Needle triangles are
     fine (their springs are short and stiff but finite).
     """
-    check_mesh(topo.V, topo.F, "the patch", manifold=True)
+    topo.require_valid("the patch", manifold=True)
     return _build_springs(topo, contour_window, crossed)
 
 

@@ -114,23 +114,15 @@ def check_mesh(V, F, what: str = "the mesh", *, nondegenerate: bool = True, mani
 
     Raises `BolusError` naming the problem and where (vertex / triangle / edge index);
     see `as_mesh_arrays` for the array checks.  Needle triangles (tiny angles but a
-    positive area) pass: the cotangent weights and springs stay finite on them.
+    positive area) pass: the cotangent weights and springs stay finite on them.  A caller
+    that holds the mesh's `MeshTopology` calls its `require_valid` instead (no rebuild).
     """
     V, F = as_mesh_arrays(V, F)
     if len(F) < min_faces:
         raise BolusError(f"{what} has {len(F)} triangle(s); at least {min_faces} are needed")
     if not (nondegenerate or manifold) or len(F) == 0:
         return V, F
-    topo = MeshTopology(V, F)
-    if nondegenerate:
-        topo.require_nondegenerate(what)
-    if manifold:
-        bad = np.nonzero(topo.nonmanifold_edges)[0]
-        if len(bad):
-            i, j = (int(x) for x in topo.edges[bad[0]])
-            raise BolusError(f"{what} has {len(bad)} non-manifold edge(s) (shared by more than two triangles), "
-                             f"e.g. the edge between vertices {i} and {j}; Select > Select All by Trait > "
-                             "Non Manifold shows them")
+    MeshTopology(V, F).require_valid(what, nondegenerate=nondegenerate, manifold=manifold)
     return V, F
 
 
@@ -440,6 +432,20 @@ class MeshTopology:
     def mean_edge_length(self) -> float:
         return float(self.edge_lengths.mean()) if len(self.edges) else 0.0
 
+    def require_valid(self, what: str = "the mesh", *, nondegenerate: bool = True, manifold: bool = False) -> None:
+        """`check_mesh` on this topology (its arrays were checked when it was built)."""
+        if self.m == 0:
+            raise BolusError(f"{what} has 0 triangle(s); at least 1 are needed")
+        if nondegenerate:
+            self.require_nondegenerate(what)
+        if manifold:
+            bad = np.nonzero(self.nonmanifold_edges)[0]
+            if len(bad):
+                i, j = (int(x) for x in self.edges[bad[0]])
+                raise BolusError(f"{what} has {len(bad)} non-manifold edge(s) (shared by more than two triangles), "
+                                 f"e.g. the edge between vertices {i} and {j}; Select > Select All by Trait > "
+                                 "Non Manifold shows them")
+
     def require_nondegenerate(self, what: str = "the mesh", vert_ids=None) -> None:
         """Raise BolusError naming the first zero-area triangle (`refuse_zero_area`)."""
         refuse_zero_area(self.F, self.degenerate_faces(), what, vert_ids)
@@ -470,11 +476,9 @@ class MeshTopology:
             )
         return [f"{where}: their vertices are treated like boundary vertices (flattenability 0)"]
 
-    def degenerate_faces(self, rel_tol: float = ZERO_AREA_REL) -> np.ndarray:
-        """(m,) bool: triangles whose area is below rel_tol * (median edge length)^2."""
-        if rel_tol == ZERO_AREA_REL:
-            return self._zero_area
-        return zero_area_mask(self.areas, self.edge_lengths, rel_tol)
+    def degenerate_faces(self) -> np.ndarray:
+        """(m,) bool: the zero-area triangles (`zero_area_mask`), computed once."""
+        return self._zero_area
 
     @cached_property
     def _zero_area(self) -> np.ndarray:

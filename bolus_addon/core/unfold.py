@@ -197,7 +197,7 @@ def _check_patch(V, F, method: str, start: str) -> tuple[np.ndarray, np.ndarray,
     topo = MeshTopology(V, F)
     if float(topo.areas.sum()) <= 0 or topo.degenerate_faces().all():
         raise BolusError("the patch has no area to unfold")
-    check_mesh(V, F, "the patch", manifold=True)  # zero-area triangles, non-manifold edges: named
+    topo.require_valid("the patch", manifold=True)  # zero-area triangles, non-manifold edges: named
     # consistent winding: every interior edge is walked once in each direction
     he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
     if len(np.unique(he[:, 0] * topo.n + he[:, 1])) < len(he):
