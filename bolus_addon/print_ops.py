@@ -82,8 +82,7 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
             face_groups=region.tri_poly, progress=lambda f, t: self.progress(0.9 * f, t),
         )
         obj, me = region.obj, region.mesh
-        poly_labels = np.full(len(me.polygons), -1, dtype=np.int64)
-        poly_labels[region.tri_poly] = seg.labels  # the triangles of one polygon share a part
+        poly_labels = region.on_polygons(np.asarray(seg.labels, dtype=np.int64), -1)  # a polygon's triangles share a part
         with mesh_io.object_mode(obj):
             mesh_io.write_attribute(me, ATTR_PRINT_PART, "INT", "FACE", poly_labels)
             mesh_io.write_face_colors(me, ATTR_PRINT_PART_COLOR, categorical_linear_rgba(poly_labels))
