@@ -4,7 +4,7 @@
 # make bench - benchmarks (printed, not asserted), their tables written to docs/benchmarks.md
 # make pictures - the README's step-by-step pictures in docs/img/ (scripts/readme_pictures.py)
 # make extension - the installable extension zip in dist/ (Blender's own builder, from bpy)
-# make extension-wheels - one zip per platform in dist/, with scipy and scikit-learn (cp311 and cp313) inside
+# make extension-wheels - one zip per platform in dist/, with scipy, scikit-learn and manifold3d (cp311 and cp313) inside
 #
 # One venv per Blender, each from its pinned requirements file and stamped .installed:
 #   .venv/   bpy 5.0.1, Python 3.11, numpy 1.26  requirements.txt       whole suite
@@ -98,7 +98,7 @@ extension: $(VENV)/.installed
 	$(PY) -c "import bpy, os, subprocess, sys; cli = os.path.join(bpy.utils.system_resource('SCRIPTS'), 'addons_core', 'bl_pkg', 'cli', 'blender_ext.py'); sys.exit(subprocess.call([sys.executable, cli, 'build', '--source-dir', '.', '--output-dir', 'dist']))"
 
 # ... then installs this machine's zip into every Blender venv present, without the venv's own
-# scipy / scikit-learn, and runs segment and unfold through it (scripts/build_extension.py --check).
+# scipy / scikit-learn / manifold3d, and runs segment and unfold through it (scripts/build_extension.py --check).
 extension-wheels: $(VENV)/.installed
 	$(PY) scripts/build_extension.py --out dist --check $(wildcard $(PY42) $(PY45) $(PY) $(PY52))
 

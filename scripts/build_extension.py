@@ -1,12 +1,13 @@
-"""Build installable extension zips that carry scipy and scikit-learn (`make extension-wheels`).
+"""Build installable extension zips that carry scipy, scikit-learn and manifold3d (`make extension-wheels`).
 
-Blender ships numpy but not scipy or scikit-learn, which the add-on's core needs.
+Blender ships numpy but not scipy, scikit-learn or manifold3d (the volume and boolean library of the
+printed bolus), which the add-on's core needs.
 Blender extensions can bundle Python wheels (manifest ``wheels = [...]``), one zip per
 platform.  Blender 4.2-5.0 run Python 3.11 and Blender 5.1+ Python 3.13, so every zip
 carries the wheels for both (cp311 and cp313); Blender installs the ones for its Python.
 This script
 
-1. downloads, with the venv's pip, the scipy and scikit-learn wheels of every platform
+1. downloads, with the venv's pip, the scipy, scikit-learn and manifold3d wheels of every platform
    asked (linux-x64, macos-arm64, macos-x64, windows-x64) for both Pythons -- cp311 at the
    versions pinned in requirements.txt, cp313 at those in requirements-bpy52.txt -- and
    the pure-Python packages they need (joblib, cloudpickle, threadpoolctl, narwhals, at
@@ -51,7 +52,7 @@ PYTHONS = {
     "cp311": ("3.11", "requirements.txt", "4.2-5.0"),
     "cp313": ("3.13", "requirements-bpy52.txt", "5.1+"),
 }
-BINARY = ("scipy", "scikit-learn")
+BINARY = ("scipy", "scikit-learn", "manifold3d")
 PURE = ("joblib", "cloudpickle", "threadpoolctl", "narwhals")
 
 
@@ -167,14 +168,15 @@ if pat is not None:
             L += abs(l1 - l0)
             L0 += l0
     out["EL"] = L / L0
-out["modules"] = {m: getattr(sys.modules.get(m), "__file__", None) for m in ("scipy", "sklearn")}
+import manifold3d  # the volume library of the printed bolus (core.solid)
+out["modules"] = {m: getattr(sys.modules.get(m), "__file__", None) for m in ("scipy", "sklearn", "manifold3d")}
 print("RESULT " + json.dumps(out))
 """
 
 
 
 #: what the extension's wheels bring; hidden from the Blender under test by `--check`
-BUNDLED_MODULES = ("scipy", "sklearn", "scikit_learn", "joblib", "threadpoolctl", "narwhals", "cloudpickle")
+BUNDLED_MODULES = ("scipy", "sklearn", "scikit_learn", "manifold3d", "joblib", "threadpoolctl", "narwhals", "cloudpickle")
 
 
 def _site_without_bundled(python: str, dest: Path) -> Path:
@@ -245,7 +247,7 @@ def check_zip(zip_path: Path, pythons: list[str]) -> int:
                 print(f"  FAILED {zip_path.name} with {python}:\n    " + "\n    ".join(bad))
             else:
                 print(f"  ok {zip_path.name} in bpy {res['bpy']} (Python {res['python']}, numpy {res['numpy']}): "
-                      f"segment and unfold finished, EL {res['EL']:.4f}, scipy and scikit-learn from the zip's wheels")
+                      f"segment and unfold finished, EL {res['EL']:.4f}, scipy, scikit-learn and manifold3d from the zip's wheels")
             failed += bool(bad)
     return int(failed > 0)
 
