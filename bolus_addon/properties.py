@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from .core.saliency import DEFAULT_SMOOTHING_MM
 
@@ -127,6 +127,53 @@ def skin_side_up_property(**kw):
     )
 
 
+LEFT_AXIS_ITEMS = [
+    ("+X", "+X (DICOM / LPS)", "The patient's left is +X, as in DICOM (LPS) coordinates (default)"),
+    ("-X", "-X (RAS)", "The patient's left is -X, as in RAS coordinates (3D Slicer, NIfTI)"),
+]
+
+
+def thickness_property(**kw):
+    return FloatProperty(name="Thickness", description="Bolus thickness in mm: the outer face's true distance "
+                         "from the skin (typically 5-20 mm; at most 50)", default=10.0, soft_min=1.0, soft_max=30.0,
+                         precision=1, **kw)
+
+
+def clearance_property(**kw):
+    return FloatProperty(name="Clearance", description="Gap in mm between the skin and the bolus's inner face "
+                         "(0 = the inner face follows the skin)", default=0.0, soft_min=0.0, soft_max=5.0, precision=2,
+                         **kw)
+
+
+def resolution_property(**kw):
+    return FloatProperty(name="Resolution", description="Voxel size in mm of the distance field the solid is "
+                         "built from: finer is more exact and slower (0.5 mm: a few ten seconds on a face region)",
+                         default=0.5, soft_min=0.2, soft_max=2.0, precision=2, **kw)
+
+
+def label_property(**kw):
+    return StringProperty(name="Label", description="Text engraved 0.6 mm deep on the bolus's outer face (e.g. a "
+                          "patient ID; each print part gets '<label> <part>') with L / R markers; empty = none",
+                          default="", **kw)
+
+
+def density_property(**kw):
+    return FloatProperty(name="Density", description="Density of the print material in g/cm³, for the bolus's "
+                         "mass (1.04: tissue-equivalent filament)", default=1.04, min=0.01, soft_min=0.5,
+                         soft_max=3.0, precision=2, **kw)
+
+
+def connector_clearance_property(**kw):
+    return FloatProperty(name="Connector clearance", description="Gap in mm between a connector's peg and its "
+                         "hole (the hole's radius and depth exceed the peg's by this much)", default=0.2, soft_min=0.0,
+                         soft_max=1.0, precision=2, **kw)
+
+
+def left_axis_property(**kw):
+    return EnumProperty(name="Patient left", description="The world axis pointing to the patient's left, "
+                        "for the L / R markers", items=LEFT_AXIS_ITEMS, default="+X", **kw)
+
+
 class BolusSettings(bpy.types.PropertyGroup):
     smoothing_mm: smoothing_property()
     color_by: color_by_property()
@@ -143,3 +190,10 @@ class BolusSettings(bpy.types.PropertyGroup):
     print_method: print_method_property()
     layer_mm: layer_property()
     skin_side_up: skin_side_up_property()
+    thickness_mm: thickness_property()
+    clearance_mm: clearance_property()
+    resolution_mm: resolution_property()
+    label: label_property()
+    density_g_cm3: density_property()
+    connector_clearance_mm: connector_clearance_property()
+    left_axis: left_axis_property()
