@@ -28,11 +28,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import struct
 import sys
 import tempfile
 import xml.etree.ElementTree as ET
-import zlib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,6 +41,7 @@ import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
 import demo  # noqa: E402  (scripts/demo.py: loading, the treatment area, the renders)
+from pictures2d import write_png  # noqa: E402  (the small PNG writer)
 
 #: every picture's width in pixels (GitHub shows README images up to about 880 px)
 WIDTH_PX = 800
@@ -54,30 +53,6 @@ UNSELECTED_SRGB = (0.8, 0.8, 0.8)
 #: thinnest line drawn for the SVG picture, in pixels (a 0.2 mm stroke is under 1 px at 800 px)
 MIN_LINE_PX = 1.3
 SVG_NS = "{http://www.w3.org/2000/svg}"
-#: low bits dropped per 8-bit channel before compressing (64 levels are plenty for these renders)
-QUANTIZE_BITS = 2
-
-
-def write_png(path: Path, rgb: np.ndarray) -> None:
-    """Write (h, w, 3) uint8 rows (top row first) as an 8-bit RGB PNG, zlib level 9.
-
-    The two lowest bits of every channel are dropped (64 levels: no visible banding on
-    Workbench shading, half the bytes) and the smallest of the PNG filters None, Sub and Up
-    is used for the whole image."""
-    h, w, _ = rgb.shape
-    q = ((rgb >> QUANTIZE_BITS) << QUANTIZE_BITS).astype(np.int16)
-    candidates = []
-    for code, rows in ((0, q), (1, np.diff(q, axis=1, prepend=np.zeros((h, 1, 3), np.int16))),
-                       (2, np.diff(q, axis=0, prepend=np.zeros((1, w, 3), np.int16)))):
-        raw = np.concatenate([np.full((h, 1), code, np.uint8), (rows % 256).astype(np.uint8).reshape(h, -1)], axis=1)
-        candidates.append(zlib.compress(raw.tobytes(), 9))
-    data = min(candidates, key=len)
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-
-    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
-                     + chunk(b"IDAT", data) + chunk(b"IEND", b""))
 
 
 def read_png(path: Path) -> np.ndarray:
