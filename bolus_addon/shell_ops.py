@@ -26,6 +26,7 @@ from mathutils import Matrix
 from . import mesh_io
 from .core.errors import BolusError
 from .core.shell import check_shell_request, make_shell
+from .core.solid import closed_report
 from .operators import BolusOperator
 from .print_ops import part_objects
 from .properties import clearance_property, label_property, resolution_property, thickness_property
@@ -167,7 +168,11 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
             warnings += list(notes)
         self.progress(0.95, "writing the bolus")
         density = float(getattr(getattr(context.scene, "bolus", None), "density_g_cm3", DEFAULT_DENSITY))
-        volume_cm3 = _volume_mm3(V, F) / 1000.0
+        final = closed_report(V, F)
+        if not final["closed"]:  # the core's solids are closed by construction: never write an open one
+            raise BolusError(f"internal error: the bolus came out open ({final['boundary_edges']} open edges, "
+                             f"{final['nonmanifold_edges']} non-manifold): nothing was made")
+        volume_cm3 = final["volume_mm3"] / 1000.0
         obj = self._write(context, region, shell, V, F, side, label, density, volume_cm3)
         warnings += list(shell.warnings)
         warnings += thin_warnings(shell, t - c)
@@ -249,12 +254,6 @@ def _link_bolus(context, src, name: str, me) -> bpy.types.Object:
                 remove_mesh(pme)
     obj.matrix_world = Matrix.Identity(4)
     return obj
-
-
-def _volume_mm3(V, F) -> float:
-    """Volume (mm³) of a closed, outward-wound triangle mesh (divergence theorem)."""
-    P = np.asarray(V, dtype=np.float64)[np.asarray(F)]
-    return float(np.einsum("ij,ij->i", P[:, 0], np.cross(P[:, 1], P[:, 2])).sum() / 6.0)
 
 
 def thin_warnings(shell, wall: float) -> list[str]:
