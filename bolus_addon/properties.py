@@ -174,7 +174,20 @@ def left_axis_property(**kw):
                         "for the L / R markers", items=LEFT_AXIS_ITEMS, default="+X", **kw)
 
 
+def area_radius_property(**kw):
+    return FloatProperty(name="Radius", description="Treatment area: the faces within this distance in mm of the 3D "
+                         "cursor, measured along the surface", default=45.0, min=0.0, soft_min=5.0, soft_max=150.0,
+                         precision=1, **kw)
+
+
+def exclude_cavities_property(**kw):
+    return BoolProperty(name="Leave out cavities", description="Leave out faces that cannot be seen from outside "
+                        "(inside the nostrils, an ear canal): they become holes of the area", default=True, **kw)
+
+
 class BolusSettings(bpy.types.PropertyGroup):
+    area_radius_mm: area_radius_property()
+    exclude_cavities: exclude_cavities_property()
     smoothing_mm: smoothing_property()
     color_by: color_by_property()
     patches: patches_property()

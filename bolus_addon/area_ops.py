@@ -1,0 +1,95 @@
+"""Operator `bolus.select_area` (SPEC; issue 11 point 0): the treatment area around the 3D cursor.
+
+Reads the whole active mesh (world mm), calls `core.treatment_area.treatment_area` with
+the 3D cursor, writes the cut (the border's level line through the faces) with
+`mesh_cuts.apply_cuts`, selects the area's faces and leaves the user in Edit Mode (face
+select mode) with it selected.  Everything is computed before the mesh is touched, so a
+refusal changes nothing; one undo step undoes it all.
+"""
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from . import mesh_cuts, mesh_io
+from .core.errors import BolusError
+from .core.treatment_area import treatment_area
+from .operators import BolusOperator
+from .properties import area_radius_property, exclude_cavities_property
+
+#: a FACE INT attribute that carries the area through `apply_cuts`; removed afterwards
+_TMP_ATTR = "bolus_area_tmp"
+
+
+class BOLUS_OT_select_area(BolusOperator, bpy.types.Operator):
+    """Select the treatment area around the 3D cursor: the faces within the radius along the surface, the border cut along a smooth curve, cavities (inside the nostrils) left out; changes the mesh"""
+
+    bl_idname = "bolus.select_area"
+    bl_label = "Select Treatment Area"
+
+    radius_mm: area_radius_property()
+    exclude_cavities: exclude_cavities_property()
+
+    def run(self, context):
+        obj = mesh_io.active_mesh_object(context)
+        me = obj.data
+        if me.shape_keys is not None:
+            raise BolusError(f"'{obj.name}' has shape keys; cutting the area's border would have to re-shape every "
+                             "key: apply or remove them first")
+        if len(me.polygons) == 0:
+            raise BolusError(f"'{obj.name}' has no faces: the bolus tools need a surface mesh")
+        region = mesh_io.read_region(context, obj, polys=np.ones(len(me.polygons), dtype=bool))
+        cursor = np.array(context.scene.cursor.location, dtype=np.float64) * region.mm_per_unit
+        area = treatment_area(region.V, region.F, cursor, self.radius_mm, self.exclude_cavities,
+                              progress=lambda f, t: self.progress(0.9 * f, t))
+        self.progress(0.9, "writing the cut")
+        _write_area(context, obj, region, area)
+        table = {
+            "radius_mm": float(self.radius_mm), "exclude_cavities": bool(self.exclude_cavities),
+            "faces": int(area.selected.sum()), "area_cm2": area.area_mm2 / 100.0,
+            "cavity_cm2": area.cavity_area_mm2 / 100.0, "cavity_fraction": area.cavity_fraction,
+            "holes": int(area.holes), "cursor_mm": [float(x) for x in cursor],
+            "cursor_to_skin_mm": area.centre_distance_mm,
+        }
+        self.warn_all(region.warnings + area.warnings)
+        self.report({"INFO"}, area_summary(obj.name, table, int(area.split.sum()), int((area.vert_parent >= 0).sum())))
+        return {"FINISHED"}
+
+
+def area_summary(name: str, t: dict, split: int, new_vertices: int) -> str:
+    """One line of figures of a selected area (the table `run` makes)."""
+    text = (f"Selected the treatment area of '{name}': {t['faces']} faces, {t['area_cm2']:.1f} cm² within "
+            f"{t['radius_mm']:g} mm of the 3D cursor along the surface (cursor {t['cursor_to_skin_mm']:.1f} mm from "
+            f"the skin)")
+    if t["exclude_cavities"]:
+        text += (f"; cavities left out: {t['cavity_cm2']:.1f} cm² ({100.0 * t['cavity_fraction']:.1f} % of the area "
+                 f"within the radius), {t['holes']} hole(s)")
+    return text + f"; border cut through {split} triangles ({new_vertices} new vertices on the surface)"
+
+
+def _write_area(context, obj, region, area) -> None:
+    """The cut into the mesh (mesh_cuts.apply_cuts), the area selected, then Edit Mode in face select mode."""
+    me = obj.data
+    if obj.mode != "OBJECT":
+        bpy.ops.object.mode_set(mode="OBJECT")
+    try:
+        sel = mesh_cuts.apply_cuts(me, region, area, _TMP_ATTR) > 0
+    finally:
+        tmp = me.attributes.get(_TMP_ATTR)
+        if tmp is not None:
+            me.attributes.remove(tmp)
+    me.polygons.foreach_set("select", sel)
+    loop_e, loop_p = mesh_io.loop_edges_and_polygons(me)
+    loop_v = mesh_io.get_array(me.loops, "vertex_index", len(me.loops), np.int64)
+    esel = np.zeros(len(me.edges), dtype=bool)
+    esel[loop_e[sel[loop_p]]] = True
+    vsel = np.zeros(len(me.vertices), dtype=bool)
+    vsel[loop_v[sel[loop_p]]] = True
+    me.edges.foreach_set("select", esel)
+    me.vertices.foreach_set("select", vsel)
+    me.update()
+    context.tool_settings.mesh_select_mode = (False, False, True)  # vertex mode would also select faces across holes
+    bpy.ops.object.mode_set(mode="EDIT")
+
+
+classes = (BOLUS_OT_select_area,)
