@@ -1,0 +1,265 @@
+"""Pegs and holes that make the printed parts of a bolus fit together (seed 6.4.3, Figure 6-17).
+
+Each joint (the planar common face of two neighbouring parts, `solid_parts.split_solid`)
+gets cylinders "on two sides close to the edge of the connected surfaces": near the two
+ends of the joint face, axis along the plane normal.  The seed puts "two connectors into
+one segment, one convex and the other concave", so the first connector is a peg on the
+joint's first part and a hole in its second, the second one the other way round: every
+part of a joint carries one peg and one hole (the parts cannot be put together the wrong
+way round) and both pegs push in along the same axis.  All volume work is manifold3d
+(cylinders, union, difference); the placement is 2D work on the joint face as a
+``manifold3d.CrossSection`` (its inward offset is the set of admissible peg centres).
+
+Sizes (the one place for them, below): the joint's thickness ``w`` is the diameter of
+the largest circle inside the joint face (for a cut straight across a shell of thickness
+t it is t, more where the plane meets the shell obliquely).
+
+* peg diameter 40 % of ``w``, at least 2 mm: a peg under 2 mm breaks off or prints as a
+  blob on a 0.4 mm nozzle; 40 % leaves 30 % of the wall on either side of the peg;
+* hole radius = peg radius + clearance (default 0.2 mm, a usual press-free fit for FDM);
+* at least 1.5 mm of material around the hole (three to four 0.4 mm perimeters), so the
+  peg centre must lie ``peg radius + clearance + 1.5 mm`` inside the joint face:
+  ``w >= 2 (r + c + 1.5)`` (5.4 mm for a 2 mm peg with 0.2 mm clearance; a 10 mm shell
+  gets 4 mm pegs);
+* peg length 1.5 x its diameter, at least 3 mm (enough to register the parts; a longer
+  peg runs out of a curved shell); hole depth = peg length + clearance;
+* the peg is made 1 mm longer into its own part (EMBED) so the union overlaps instead of
+  touching (no coplanar faces in the boolean); that part of it lies inside the part and
+  adds no volume.
+
+Checks, with manifold volumes: the peg's anchor (the EMBED length) lies inside its part,
+the peg adds exactly the volume of its protruding length, and the hole widened by the
+1.5 mm wall (and deepened by it) lies inside the hole's part (also clear of holes placed
+before).  A connector failing them is tried at half length, then dropped with a note.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+import manifold3d as m3
+
+__all__ = [
+    "CLEARANCE", "PEG_DIAMETER_FRACTION", "PEG_MIN_DIAMETER", "WALL_MIN", "PEG_LENGTH_FACTOR",
+    "PEG_MIN_LENGTH", "EMBED", "SEGMENTS",
+    "Connector", "connector_size", "polygon_area", "plane_frame", "to_plane", "from_plane",
+    "section_of_triangles", "inscribed_radius", "cylinder", "place_centres", "add_joint_connectors",
+]
+
+CLEARANCE = 0.2  #: mm, hole radius - peg radius and hole depth - peg length (a free, not press, fit)
+PEG_DIAMETER_FRACTION = 0.4  #: peg diameter / joint thickness
+PEG_MIN_DIAMETER = 2.0  #: mm: thinner pegs break off or print as blobs
+WALL_MIN = 1.5  #: mm of material around a hole (and beyond its bottom)
+PEG_LENGTH_FACTOR = 1.5  #: peg length / peg diameter
+PEG_MIN_LENGTH = 3.0  #: mm
+EMBED = 1.0  #: mm the peg cylinder reaches back into its own part (the union overlaps, never touches)
+SEGMENTS = 32  #: sides of the peg and hole polygons (same angles: the clearance is even all round)
+SLACK = 0.5  #: mm: peg centres sit up to this much deeper than the bare minimum when the joint allows
+INSIDE_TOL = 1e-4  #: relative volume left outside a part that still counts as inside (round-off)
+
+
+@dataclass
+class Connector:
+    """One peg and its hole across a joint."""
+
+    parts: tuple  #: (peg part, hole part)
+    centre: np.ndarray  #: (3,) on the joint plane
+    axis: np.ndarray  #: (3,) unit, from the peg part into the hole part (the plane normal)
+    peg_radius: float
+    hole_radius: float  #: peg_radius + clearance
+    peg_length: float
+    hole_depth: float  #: peg_length + clearance
+
+    def as_dict(self) -> dict:
+        return {"parts": [int(p) for p in self.parts], "centre": [float(x) for x in self.centre],
+                "axis": [float(x) for x in self.axis], "peg_radius": float(self.peg_radius),
+                "hole_radius": float(self.hole_radius), "peg_length": float(self.peg_length),
+                "hole_depth": float(self.hole_depth)}
+
+
+def connector_size(thickness: float, clearance: float = CLEARANCE) -> tuple[float, float, float]:
+    """(peg radius, peg length, least joint thickness that holds it) in mm for a joint of
+    ``thickness`` mm (module doc)."""
+    r = max(0.5 * PEG_MIN_DIAMETER, 0.5 * PEG_DIAMETER_FRACTION * float(thickness))
+    length = max(PEG_MIN_LENGTH, PEG_LENGTH_FACTOR * 2.0 * r)
+    return r, length, 2.0 * (r + clearance + WALL_MIN)
+
+
+def polygon_area(radius: float, segments: int = SEGMENTS) -> float:
+    """Area (mm^2) of the regular ``segments``-gon of circumradius ``radius`` (a peg's section)."""
+    return 0.5 * segments * radius**2 * np.sin(2.0 * np.pi / segments)
+
+
+def plane_frame(normal, offset: float) -> tuple[np.ndarray, np.ndarray]:
+    """(origin (3,), U (2,3) orthonormal rows u, v with u x v = normal) of the plane
+    normal . x + offset = 0 (normal (3,) unit)."""
+    n = np.asarray(normal, dtype=np.float64)
+    a = np.eye(3)[int(np.argmin(np.abs(n)))]
+    u = np.cross(n, a)
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    return -float(offset) * n, np.stack([u, v])
+
+
+def to_plane(P, origin, U) -> np.ndarray:
+    """Points P (k,3) -> plane coordinates (k,2)."""
+    return (np.asarray(P, dtype=np.float64) - origin) @ U.T
+
+
+def from_plane(Q, origin, U) -> np.ndarray:
+    """Plane coordinates Q (k,2) -> points (k,3) on the plane."""
+    return origin + np.asarray(Q, dtype=np.float64) @ U
+
+
+def section_of_triangles(T) -> m3.CrossSection:
+    """The region (CrossSection) covered by 2D triangles T (k,3,2) (each made counter-clockwise)."""
+    T = np.asarray(T, dtype=np.float64)
+    if len(T) == 0:
+        return m3.CrossSection()
+    e1, e2 = T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]
+    cross = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    T = np.where((cross < 0)[:, None, None], T[:, ::-1], T)
+    keep = np.abs(cross) > 1e-12
+    return m3.CrossSection([np.ascontiguousarray(t) for t in T[keep]], m3.FillRule.NonZero)
+
+
+def inscribed_radius(section: m3.CrossSection, tol: float = 0.02) -> float:
+    """Radius (mm) of the largest circle inside ``section``, to ``tol`` (bisection on the
+    inward offset, which is empty exactly when no such circle of that radius fits)."""
+    if section.is_empty():
+        return 0.0
+    x0, y0, x1, y1 = section.bounds()
+    lo, hi = 0.0, 0.5 * min(x1 - x0, y1 - y0) + tol
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        if section.offset(-mid).is_empty():
+            hi = mid
+        else:
+            lo = mid
+    return lo
+
+
+def _vertices(section: m3.CrossSection) -> np.ndarray:
+    polys = section.to_polygons()
+    return np.vstack(polys) if polys else np.zeros((0, 2))
+
+
+def place_centres(section: m3.CrossSection, peg_radius: float, clearance: float,
+                  inscribed: float | None = None) -> list[np.ndarray]:
+    """Candidate peg centres in the joint face ``section`` (2D), one list per connector:
+    [(t,2) array, ...] with 0, 1 or 2 entries, best candidate first.
+
+    The admissible centres are the inward offset of the face by peg radius + clearance +
+    WALL_MIN; the first candidates are its two ends (its two vertices farthest apart),
+    moved up to SLACK deeper; the next ones step inward along it (2, 4, 8, 16 peg radii
+    from the end), for when a hole at the end would leave its part.  One list when the
+    two ends are closer than two holes and a wall, none when no centre is admissible."""
+    need = peg_radius + clearance + WALL_MIN
+    R = inscribed_radius(section) if inscribed is None else inscribed
+    feasible = section.offset(-need)
+    if feasible.is_empty():
+        return []
+    P = _vertices(feasible)
+    deeper = section.offset(-(need + min(SLACK, 0.5 * max(R - need, 0.0))))
+    Q = _vertices(deeper) if not deeper.is_empty() else P
+    a = P[np.argmax(np.linalg.norm(P - P.mean(axis=0), axis=1))]
+    b = P[np.argmax(np.linalg.norm(P - a, axis=1))]
+    out = []
+    for end in (a, b):
+        d = np.linalg.norm(Q - end, axis=1)
+        picks = [int(np.argmin(d))] + [int(np.argmin(np.abs(d - s * peg_radius))) for s in (2, 4, 8, 16)]
+        out.append(Q[list(dict.fromkeys(picks))])
+    if np.linalg.norm(out[0][0] - out[1][0]) < 2.0 * (peg_radius + clearance) + WALL_MIN:
+        core = section.offset(-max(need, 0.9 * R))
+        C = _vertices(core) if not core.is_empty() else P
+        return [C[np.argmin(np.linalg.norm(C - C.mean(axis=0), axis=1))][None]]
+    return out
+
+
+def cylinder(centre, axis, radius: float, start: float, end: float, segments: int = SEGMENTS) -> m3.Manifold:
+    """Cylinder of ``radius`` around the line centre + s axis, s in [start, end] (mm).  The
+    polygon's corners sit at the same angles for every call with the same axis."""
+    n = np.asarray(axis, dtype=np.float64)
+    n = n / np.linalg.norm(n)
+    _, U = plane_frame(n, 0.0)
+    t = np.asarray(centre, dtype=np.float64) + start * n
+    M = np.column_stack([U[0], U[1], n, t])
+    return m3.Manifold.cylinder(float(end - start), float(radius), circular_segments=segments).transform(M.tolist())
+
+
+def _outside(A: m3.Manifold, B: m3.Manifold) -> float:
+    """Volume (mm^3) of A outside B."""
+    return float((A - B).volume())
+
+
+def _overlap(A: m3.Manifold, others: list) -> float:
+    """Volume (mm^3) of A inside any of ``others``."""
+    return sum(float((A ^ B).volume()) for B in others)
+
+
+def _try_connector(peg_part, hole_part, centre, axis, r, length, clearance, keep_peg, keep_hole):
+    """(new peg part, new hole part, peg, hole, anchor, guard) or a reason string."""
+    anchor = cylinder(centre, axis, r + WALL_MIN, -EMBED, 0.0)
+    base = cylinder(centre, axis, r, -EMBED, 0.0)
+    if _outside(base, peg_part) > INSIDE_TOL * base.volume():
+        return "the peg's base is not inside its part"
+    guard = cylinder(centre, axis, r + clearance + WALL_MIN, 0.0, length + clearance + WALL_MIN)
+    if _outside(guard, hole_part) > INSIDE_TOL * guard.volume():
+        return "the hole and its wall would not stay inside the other part"
+    if _overlap(guard, keep_hole) > INSIDE_TOL * guard.volume() or \
+            _overlap(anchor, keep_peg) > INSIDE_TOL * anchor.volume():
+        return "it would run into another connector"
+    peg = cylinder(centre, axis, r, -EMBED, length)
+    hole = cylinder(centre, axis, r + clearance, -EMBED, length + clearance)
+    new_peg = peg_part + peg
+    added = new_peg.volume() - peg_part.volume()
+    if abs(added - polygon_area(r) * length) > INSIDE_TOL * peg.volume() + 1e-6:
+        return "the peg would run into its own part"
+    return new_peg, hole_part - hole, peg, hole, anchor, guard
+
+
+def add_joint_connectors(parts: list, pair: tuple, normal, candidates: list, r: float, length: float,
+                         clearance: float = CLEARANCE, ids: set | None = None, keepout: dict | None = None):
+    """Put pegs and holes on the joint of parts ``pair`` = (i, j) whose plane normal (3,)
+    points from i into j.  ``candidates``: one (t,3) array of centres on the plane per
+    connector, tried in order (each at full, then half length).  ``parts``: list of
+    ``manifold3d.Manifold``, updated in place.  Connector c (0, 1) has its peg on
+    pair[c % 2], its hole in the other.  ``ids`` collects the original ids of the cylinders
+    (the faces they leave are connector faces); ``keepout`` {part: [Manifold]} the space
+    each part's earlier connectors need (holes with their walls, peg bases), updated.
+    Returns (connectors, notes)."""
+    normal = np.asarray(normal, dtype=np.float64)
+    keepout = {} if keepout is None else keepout
+    done, notes = [], []
+    for c, cand in enumerate(candidates):
+        p, h = (pair[0], pair[1]) if c % 2 == 0 else (pair[1], pair[0])
+        axis = normal if c % 2 == 0 else -normal
+        cand = np.asarray(cand, dtype=np.float64).reshape(-1, 3)
+        made, reason = None, "it would sit too close to the other connector"
+        for x in cand:
+            if any(np.linalg.norm(x - d.centre) < 2.0 * (r + clearance) + WALL_MIN for d in done):
+                continue
+            for L in dict.fromkeys([length, max(PEG_MIN_LENGTH, 0.5 * length)]):
+                out = _try_connector(parts[p], parts[h], x, axis, r, L, clearance,
+                                     keepout.get(p, []), keepout.get(h, []))
+                if isinstance(out, str):
+                    reason = out
+                    continue
+                parts[p], parts[h], peg, hole, anchor, guard = out
+                keepout.setdefault(p, []).append(anchor)
+                keepout.setdefault(h, []).append(guard)
+                if ids is not None:
+                    for cyl in (peg, hole):
+                        ids.update(int(i) for i in np.asarray(cyl.to_mesh64().run_original_id))
+                made = Connector((int(p), int(h)), x.copy(), axis.copy(), float(r), float(r + clearance),
+                                 float(L), float(L + clearance))
+                break
+            if made is not None:
+                break
+        if made is None:
+            x = cand[0]
+            notes.append(f"connector near ({x[0]:.1f}, {x[1]:.1f}, {x[2]:.1f}) mm left out: {reason}")
+        else:
+            done.append(made)
+    return done, notes
