@@ -246,3 +246,11 @@ def stl_file_name(part) -> str:
     label = str(src.get(PROP_LABEL, "")) if src is not None else ""
     label = re.sub(r"[^A-Za-z0-9._-]+", "_", label).strip("._")
     return f"{label}_{part.name}.stl" if label else f"{part.name}.stl"
+
+
+def export_note(context, part, file_name: str) -> tuple[str, str]:
+    """(report level, text) saying whether the exported solid part is closed (SPEC)."""
+    r = part_closed_report(context, part)
+    if r["closed"]:
+        return "INFO", f"{file_name}: closed, {abs(r['volume_mm3']) / 1000:.1f} cm³"
+    return "WARNING", closed_warnings([r], [file_name])[0]
