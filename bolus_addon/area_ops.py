@@ -68,16 +68,35 @@ def area_summary(name: str, t: dict, split: int, new_vertices: int) -> str:
 
 
 def _write_area(context, obj, region, area) -> None:
-    """The cut into the mesh (mesh_cuts.apply_cuts), the area selected, then Edit Mode in face select mode."""
+    """The cut written and the area selected, in Edit Mode (face select mode).
+
+    The cut is written into a copy of the mesh with `mesh_cuts.apply_cuts` (object-mode
+    data), which then replaces the edit-mesh: the mesh data-block itself only changes when
+    Edit Mode is left, so the operator is one edit-mesh undo step, also when it was started
+    in Object Mode (writing the data-block there would make undo stop at an Object Mode
+    state with the cut mesh first)."""
+    import bmesh
+
+    if obj.mode != "EDIT":
+        bpy.ops.object.mode_set(mode="EDIT")
     me = obj.data
-    if obj.mode != "OBJECT":
-        bpy.ops.object.mode_set(mode="OBJECT")
+    tmp = me.copy()
     try:
-        sel = mesh_cuts.apply_cuts(me, region, area, _TMP_ATTR) > 0
+        sel = mesh_cuts.apply_cuts(tmp, region, area, _TMP_ATTR) > 0
+        tmp.attributes.remove(tmp.attributes[_TMP_ATTR])
+        _select_faces(tmp, sel)
+        context.tool_settings.mesh_select_mode = (False, False, True)  # vertex mode would select faces across holes
+        bm = bmesh.from_edit_mesh(me)
+        bm.clear()
+        bm.from_mesh(tmp)
+        bm.select_mode = {"FACE"}
+        bmesh.update_edit_mesh(me)
     finally:
-        tmp = me.attributes.get(_TMP_ATTR)
-        if tmp is not None:
-            me.attributes.remove(tmp)
+        bpy.data.meshes.remove(tmp)
+
+
+def _select_faces(me, sel: np.ndarray) -> None:
+    """Select exactly the polygons sel (p,) bool with their edges and vertices (object-mode data)."""
     me.polygons.foreach_set("select", sel)
     loop_e, loop_p = mesh_io.loop_edges_and_polygons(me)
     loop_v = mesh_io.get_array(me.loops, "vertex_index", len(me.loops), np.int64)
@@ -88,8 +107,6 @@ def _write_area(context, obj, region, area) -> None:
     me.edges.foreach_set("select", esel)
     me.vertices.foreach_set("select", vsel)
     me.update()
-    context.tool_settings.mesh_select_mode = (False, False, True)  # vertex mode would also select faces across holes
-    bpy.ops.object.mode_set(mode="EDIT")
 
 
 classes = (BOLUS_OT_select_area,)

@@ -41,6 +41,8 @@ __all__ = ["Area", "treatment_area", "cavity_faces", "geodesic_distance", "OPENN
 
 #: faces less open than this (fraction of the sky above them they can see) are cavity faces
 OPENNESS_THRESHOLD = 0.2
+#: the back side is taken as the outside when its mean openness exceeds the front's by this much
+FLIP_MARGIN = 0.25
 #: faces up to this many radii along the surface may hide a face of the area
 OCCLUDER_REACH = 1.5
 
@@ -115,20 +117,28 @@ def cavity_faces(V, F, faces=None, *, threshold: float = OPENNESS_THRESHOLD, dir
     """(m,) bool: faces (of ``faces``, default all) less open than ``threshold`` on the outer side.
 
     V (n,3) mm, F (m,3): the surface (all of it may hide a face).  The outer side is the
-    side more open on the area-weighted mean over ``faces`` (`visibility.openness`)."""
+    normals' side unless the back is much more open (`_outer_openness`, `visibility.openness`)."""
     V, F = check_mesh(V, F, "the surface")
     faces = np.arange(len(F)) if faces is None else np.asarray(faces, dtype=np.int64)
-    o = _outer_openness(V, F, faces, directions, progress)
+    o, _ = _outer_openness(V, F, faces, directions, progress)
     out = np.zeros(len(F), dtype=bool)
     out[faces] = o < threshold
     return out
 
 
-def _outer_openness(V, F, faces, directions, progress) -> np.ndarray:
-    """Openness (k,) of ``faces`` on the outer side (the side more open overall)."""
+def _outer_openness(V, F, faces, directions, progress) -> tuple[np.ndarray, bool]:
+    """(openness (k,) of ``faces`` on the outer side, flipped).
+
+    The outer side is the side of the normals (right-hand winding; the project's
+    convention: skin normals point away from the body), unless the other side is more
+    open by more than FLIP_MARGIN on the area-weighted mean (a mesh wound inside out,
+    e.g. a closed head whose normals point inward): then that side, and flipped=True."""
     front, back = openness(V, F, faces, directions=directions, progress=progress)
     A = face_areas(V, F[faces])
-    return front if A @ front >= A @ back else back
+    tot = max(float(A.sum()), 1e-300)
+    if (A @ back - A @ front) / tot > FLIP_MARGIN:
+        return back, True
+    return front, False
 
 
 def _vertex_openness(V, F, faces, o_face) -> np.ndarray:
@@ -193,13 +203,13 @@ def treatment_area(V, F, centre, radius_mm: float = 45.0, exclude_cavities: bool
         raise BolusError(f"no face lies within {radius:g} mm of the cursor along the surface: choose a larger radius")
     # 2. cavities: openness = threshold
     cav = np.zeros(len(st.F), dtype=bool)
+    flipped = False
     if exclude_cavities:
         report(0.2, "openness (cavities)")
         meas = np.unique(st.parent[inside])  # input faces holding the area
         occl = np.nonzero(dom)[0]
         pos = np.searchsorted(occl, meas)
-        o_face = _outer_openness(V, F[occl], pos, directions,
-                                 lambda fr, t: report(0.2 + 0.6 * fr, t))
+        o_face, flipped = _outer_openness(V, F[occl], pos, directions, lambda fr, t: report(0.2 + 0.6 * fr, t))
         ov = _vertex_openness(V, F, meas, o_face)
         phi2 = float(openness_threshold) - _on_new_vertices(st, ov)  # > 0 in a cavity
         labels2 = np.where(inside, np.where(phi2[st.F].mean(axis=1) > 0, _OUT, _IN), _FAR)
@@ -208,6 +218,10 @@ def treatment_area(V, F, centre, radius_mm: float = 45.0, exclude_cavities: bool
         inside = st.labels == _IN
     report(0.9, "the area")
     area = _finish(V, F, st, inside, cav, d, p, f0, how_far, radius)
+    if exclude_cavities and flipped:
+        area.warnings.append("the surface's normals point into the body (its back side is the more open one): "
+                             "cavities were looked for on the back side; recalculate the normals outside "
+                             "(Mesh > Normals > Recalculate Outside)")
     if not (d[finite] > radius).any():
         area.warnings.append(f"the whole connected surface lies within {radius:g} mm of the cursor: nothing was cut "
                              "at the radius")

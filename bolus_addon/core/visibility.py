@@ -10,8 +10,8 @@ vis(c, w) = 1 when the ray c + s w (s > 0) meets no triangle of the surface give
 on a flat or convex piece, about 0.5 at the bottom of a right-angled crease, near 0
 deep in a pocket whose opening is small (the inside of a nostril, an ear canal): such
 faces face inward, towards the other walls of the pocket.  Both sides of the surface
-are measured (n and -n); `treatment_area` takes the side that is open overall as the
-outside.
+are measured (n and -n); `treatment_area` takes the normals' side as the outside
+unless the back is much more open (a mesh wound inside out).
 
 Computation: K directions w spread evenly over the sphere (a Fibonacci lattice); for each
 one the surface is rasterised orthographically along w into a height buffer (numpy;
