@@ -1,0 +1,760 @@
+"""Benchmark of the printed bolus: `core.shell.make_shell` against Blender's Solidify (printed, not asserted).
+
+Run from the repository root:
+
+    .venv/bin/python bench/shell_bench.py            # three regions, 0.5 and 1.0 mm, parts (under 10 minutes)
+    .venv/bin/python bench/shell_bench.py --quick    # the example nose region at 1.0 mm only
+    .venv/bin/python bench/shell_bench.py --json out/shell_bench.json
+    .venv/bin/python bench/shell_bench.py --markdown docs/benchmarks.md   # append the tables (make bench)
+
+Regions (skin surfaces in mm, face normals pointing away from the body, i.e. the side
+the bolus grows on):
+
+* ``example nose``: the demo's treatment area on ``assets/ict_face_narrow.obj`` (cm -> mm):
+  ``core.treatment_area.treatment_area(V, F, tip, 45 mm)`` when that module is there (the
+  core of ``bolus.select_area``), else the demo's own selection (``scripts/demo.py
+  select_treatment_area``: polygons whose centre lies within 45 mm of the nose tip and
+  whose normal faces forward, the piece connected to the tip);
+* ``nefertiti face``: ``nefertiti.obj`` (mm), the triangles with every corner within
+  ``FACE_RADIUS_MM`` of the nose tip (the vertex of largest z), the edge-connected piece
+  holding it, midpoint-subdivided until it has at least ``MIN_FACES`` triangles;
+* ``demosthenes face``: ``demosthenes.obj`` (normalised units) scaled so that its head,
+  from the chin (y = ``DEMOSTHENES_CHIN_Y``, where the shoulders end) to the crown (the
+  largest y), is ``HEAD_MM`` tall; then cropped and subdivided like nefertiti.
+
+For every region, each call in a child process of its own (``--worker``: the figures
+of one call do not depend on what ran before, and the peak memory is the child's):
+
+* ours: ``make_shell(V, F, thickness=10, resolution=r)`` for r in ``RESOLUTIONS``;
+* the peer: Blender's Solidify modifier on a mesh object of the same region,
+  ``solidify_mode='NON_MANIFOLD'`` (complex), ``thickness=10``, ``offset=+1`` (the new
+  face on the side the normals point to), ``use_rim=True``, ``use_even_offset=True``,
+  with ``nonmanifold_thickness_mode`` 'EVEN' (the issue's "even thickness") and
+  'CONSTRAINTS' (Blender's default), evaluated through the depsgraph (only the
+  evaluation is timed);
+* time (wall clock of the call alone), peak memory (the child's VmHWM, reset just before
+  the call, minus its RSS before the call: manifold3d allocates in C++, which tracemalloc
+  does not see).
+
+Then, measured here the same way for both (``measure_solid``):
+
+* closed: ``core.solid.closed_report`` (every edge two faces in opposite directions);
+  volume in cm³;
+* thickness min / mean / max (SPEC): from every skin vertex farther than the thickness
+  from the region's border (boundary loops, holes included), a ray along the skin's
+  vertex normal (eq. 3-2) to the first hit on the OUTER face (ours: faces with
+  ``side == SIDE_OUTER``; Solidify: its offset layer), Blender's ``BVHTree.ray_cast``,
+  up to ``RAY_MAX`` x the thickness ("miss" beyond);
+* self-intersecting face pairs: ``BVHTree.overlap`` of the solid with itself, pairs that
+  share a vertex left out (coplanar overlaps are not found by it);
+* folded triangles (Solidify only): offset-layer triangles whose normal turned against
+  their source face's (n . n_source <= 0; the modifier copies a face attribute holding
+  the source face index).
+
+Parts (when ``core.solid_parts.split_solid`` is there, else a printed note): the
+0.5 mm shell (1.0 with ``--quick``) is split into 3 parts along the ABcut print
+segmentation of its skin (``print_segment(skin, 3, rng=0)``) with peg/hole connectors
+(clearance 0.2 mm): the time of ``split_solid``, each part closed?, the parts' volumes
+against the shell's, and the total support volume (SPEC) of the parts, each in its best
+orientation (``print_orientation.orient``), against the whole shell's in its own best
+orientation.
+
+Meshes come from ``<repo>/../shared/meshes`` (override with BOLUS_SHARED_MESHES).
+"""
+from __future__ import annotations
+
+import gc
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import benchutil
+from benchutil import ROOT, SHARED_MESHES, Table
+from unfold_bench import midpoint_subdivide, region_around, submesh
+
+THICKNESS_MM = 10.0
+RESOLUTIONS = (0.5, 1.0)
+RESOLUTIONS_QUICK = (1.0,)
+NOSE_RADIUS_MM = 45.0  # the demo's treatment area (scripts/demo.py --radius default)
+FACE_RADIUS_MM = 100.0
+MIN_FACES = 15000
+HEAD_MM = 230.0
+DEMOSTHENES_CHIN_Y = 0.75  # normalised units: below it the bust widens into the shoulders
+PARTS = 3
+PARTS_CLEARANCE_MM = 0.2
+RAY_MAX = 3.0  # rays longer than RAY_MAX * thickness count as missing the outer face
+BORDER_STEP_MM = 0.25  # border edges are sampled this finely for the distance to the border
+WORKER_TIMEOUT_S = 600
+#: (key, nonmanifold_thickness_mode)
+SOLIDIFY_MODES = (("Solidify even", "EVEN"), ("Solidify constraints", "CONSTRAINTS"))
+REGIONS = ("example nose", "nefertiti face", "demosthenes face")
+QUICK_REGIONS = ("example nose",)
+
+
+# ----------------------------------------------------------------------------- regions
+
+
+def _subdivide_to(V, F, min_faces: int):
+    """Midpoint-subdivide (V, F) until it has at least min_faces triangles -> (V, F, times subdivided)."""
+    k = 0
+    while len(F) < min_faces:
+        V, F = midpoint_subdivide(V, F)
+        k += 1
+    return V, F, k
+
+
+def outward(V, F, inside):
+    """(F, flipped): the triangles wound so that their area-weighted mean normal points away from ``inside`` (3,)."""
+    import numpy as np
+
+    from bolus_addon.core.topology import MeshTopology
+
+    t = MeshTopology(V, F)
+    n = (t.face_normals * t.areas[:, None]).sum(axis=0)
+    if float(n @ (t.centroids.mean(axis=0) - inside)) >= 0:
+        return F, False
+    return np.ascontiguousarray(F[:, ::-1]), True
+
+
+def demo_selection(V, F, tri_face, radius_mm: float = NOSE_RADIUS_MM):
+    """The demo's treatment area in arrays (scripts/demo.py select_treatment_area, OBJ axes: the face looks
+    towards +z): the OBJ polygons whose centre (mean of its vertices) lies within radius_mm of the nose tip (the
+    vertex of largest z) and whose normal has z > 0.1, the edge-connected piece holding the polygon nearest the
+    tip.  Returns the triangle mask (m,) bool."""
+    import numpy as np
+
+    from bolus_addon.core.topology import MeshTopology, face_areas, face_normals
+
+    tip = V[int(np.argmax(V[:, 2]))]
+    npoly = int(tri_face.max()) + 1
+    pv = np.unique(np.stack([np.repeat(tri_face, 3), F.ravel()], axis=1), axis=0)  # (polygon, vertex) pairs
+    centre = np.zeros((npoly, 3))
+    np.add.at(centre, pv[:, 0], V[pv[:, 1]])
+    centre /= np.bincount(pv[:, 0], minlength=npoly)[:, None]
+    normal = np.zeros((npoly, 3))
+    np.add.at(normal, tri_face, face_normals(V, F) * face_areas(V, F)[:, None])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    sel = (np.linalg.norm(centre - tip, axis=1) < radius_mm) & (normal[:, 2] > 0.1)
+    keep = sel[tri_face]
+    _, comp = MeshTopology(V, F[keep]).face_components()
+    tip_poly = np.nonzero(sel)[0][np.argmin(np.linalg.norm(centre[sel] - tip, axis=1))]
+    tip_comp = comp[np.nonzero(tri_face[keep] == tip_poly)[0][0]]
+    out = np.zeros(len(F), dtype=bool)
+    out[np.nonzero(keep)[0][comp == tip_comp]] = True
+    return out
+
+
+def example_region() -> dict:
+    """The example nose region (module doc): V, F (mm), the rest of the face (others), how it was made."""
+    import numpy as np
+
+    from bolus_addon.core.objfile import load_obj
+
+    V, F, tri_face = load_obj(ROOT / "assets" / "ict_face_narrow.obj", 10.0)
+    tip = V[int(np.argmax(V[:, 2]))]
+    try:
+        from bolus_addon.core.treatment_area import treatment_area
+    except ImportError:
+        treatment_area = None
+    if treatment_area is not None:
+        area = treatment_area(V, F, tip, NOSE_RADIUS_MM, exclude_cavities=True)
+        Vr, Fr = submesh(area.V, area.F, area.selected)
+        how = (f"ict_face_narrow.obj x10 (cm -> mm), treatment_area(tip, {NOSE_RADIUS_MM:g} mm, "
+               f"exclude_cavities=True) (bolus.select_area's core): {len(Fr)} triangles, {area.holes} holes")
+    else:
+        sel = demo_selection(V, F, tri_face)
+        Vr, Fr = submesh(V, F, sel)
+        how = (f"ict_face_narrow.obj x10 (cm -> mm), the demo's selection (core.treatment_area not there yet): "
+               f"polygons within {NOSE_RADIUS_MM:g} mm of the nose tip facing forward, connected: {len(Fr)} triangles")
+    Fr, flipped = outward(Vr, Fr, V.mean(axis=0))
+    return {"name": "example nose", "V": Vr, "F": Fr, "how": how + (", rewound outward" if flipped else "")}
+
+
+def face_region(name: str, fname: str, scale: float, unit_note: str) -> dict:
+    """A face crop of a bust (module doc): sphere of FACE_RADIUS_MM around the nose tip, connected, subdivided."""
+    import numpy as np
+
+    from bolus_addon.core.objfile import load_obj
+
+    path = SHARED_MESHES / fname
+    if not path.exists():
+        raise FileNotFoundError(f"{path} not found")
+    V, F, _ = load_obj(path, scale)
+    tip = V[int(np.argmax(V[:, 2]))]
+    Vr, Fr = region_around(V, F, tip, FACE_RADIUS_MM)
+    n0 = len(Fr)
+    Vr, Fr, k = _subdivide_to(Vr, Fr, MIN_FACES)
+    Fr, flipped = outward(Vr, Fr, V.mean(axis=0))
+    ext = Vr.max(axis=0) - Vr.min(axis=0)
+    how = (f"{fname} ({unit_note}): the {n0} triangles within {FACE_RADIUS_MM:g} mm of the nose tip (largest z), "
+           f"connected to it, midpoint-subdivided {k}x -> {len(Fr)} triangles, bbox {ext[0]:.0f} x {ext[1]:.0f} x "
+           f"{ext[2]:.0f} mm" + (", rewound outward" if flipped else ""))
+    return {"name": name, "V": Vr, "F": Fr, "how": how}
+
+
+def demosthenes_scale() -> float:
+    """mm per normalised unit of demosthenes.obj: the head from DEMOSTHENES_CHIN_Y to the crown is HEAD_MM."""
+    from bolus_addon.core.objfile import load_obj
+
+    V, _, _ = load_obj(SHARED_MESHES / "demosthenes.obj", 1.0)
+    return HEAD_MM / (float(V[:, 1].max()) - DEMOSTHENES_CHIN_Y)
+
+
+def make_region(name: str) -> dict:
+    if name == "example nose":
+        return example_region()
+    if name == "nefertiti face":
+        return face_region(name, "nefertiti.obj", 1.0, "mm")
+    if name == "demosthenes face":
+        s = demosthenes_scale()
+        return face_region(name, "demosthenes.obj", s,
+                           f"x {s:.1f}: head from chin y = {DEMOSTHENES_CHIN_Y} to crown = {HEAD_MM:g} mm")
+    raise ValueError(f"unknown region {name!r}")
+
+
+# ----------------------------------------------------------------------------- measures (one for both methods)
+
+
+def border_distance(V, F):
+    """(n,) distance of every vertex to the region's border (all boundary loops, sampled every BORDER_STEP_MM)."""
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    from bolus_addon.core.cutting import boundary_loops
+
+    loops = boundary_loops(F)
+    if not loops:
+        return np.full(len(V), np.inf)
+    pts = []
+    for loop in loops:
+        a, b = V[loop], V[np.roll(loop, -1)]
+        k = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=1) / BORDER_STEP_MM).astype(int))
+        for i in range(len(a)):
+            s = np.arange(k[i])[:, None] / k[i]
+            pts.append(a[i] + s * (b[i] - a[i]))
+    return cKDTree(np.vstack(pts)).query(V)[0]
+
+
+def ray_thickness(skin_V, skin_F, outer_V, outer_F, thickness: float) -> dict:
+    """SPEC thickness: rays from the skin vertices farther than `thickness` from the border, along the skin's
+    vertex normals, to the first hit on the outer face (outer_V (k,3), outer_F (j,3)); BVHTree ray casts.
+
+    Returns rays, missed (no hit within RAY_MAX * thickness), min / mean / max over the hits (mm), thin (hits
+    below 0.95 t) and the (rays,) distances (inf where missed)."""
+    import numpy as np
+    from mathutils import Vector
+    from mathutils.bvhtree import BVHTree
+
+    from bolus_addon.core.topology import MeshTopology
+
+    N = MeshTopology(skin_V, skin_F).vertex_normals
+    far = (border_distance(skin_V, skin_F) > thickness) & (np.linalg.norm(N, axis=1) > 0)
+    tree = BVHTree.FromPolygons(outer_V.tolist(), outer_F.tolist(), all_triangles=True)
+    reach = RAY_MAX * thickness
+    d = np.full(int(far.sum()), np.inf)
+    for k, (p, n) in enumerate(zip(skin_V[far], N[far])):
+        hit = tree.ray_cast(Vector(p), Vector(n), reach)
+        if hit[0] is not None:
+            d[k] = hit[3]
+    ok = np.isfinite(d)
+    out = {"rays": int(len(d)), "missed": int((~ok).sum()), "thin": int((d[ok] < 0.95 * thickness).sum()),
+           "min": None, "mean": None, "max": None, "distances": d}
+    if ok.any():
+        out.update(min=float(d[ok].min()), mean=float(d[ok].mean()), max=float(d[ok].max()))
+    return out
+
+
+def self_intersections(V, F) -> int:
+    """Pairs of triangles of (V, F) that intersect (BVHTree.overlap of the mesh with itself), leaving out pairs
+    that share a vertex (neighbours touch by construction)."""
+    import numpy as np
+    from mathutils.bvhtree import BVHTree
+
+    tree = BVHTree.FromPolygons(np.asarray(V).tolist(), np.asarray(F).tolist(), all_triangles=True)
+    pairs = np.array(tree.overlap(tree), dtype=np.int64).reshape(-1, 2)
+    pairs = pairs[pairs[:, 0] < pairs[:, 1]]
+    if not len(pairs):
+        return 0
+    a, b = F[pairs[:, 0]], F[pairs[:, 1]]
+    share = (a[:, :, None] == b[:, None, :]).any(axis=(1, 2))
+    return int((~share).sum())
+
+
+def folded_triangles(V, F, src, skin_V, skin_F) -> int:
+    """Offset-layer triangles (V, F) whose normal turned against their source skin face's (src (j,) index into
+    skin_F): n . n_source <= 0 (a collapsed triangle counts as folded)."""
+    import numpy as np
+
+    from bolus_addon.core.topology import face_normals
+
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    return int((np.einsum("ij,ij->i", n, face_normals(skin_V, skin_F)[src]) <= 0).sum())
+
+
+def measure_solid(V, F, outer, skin_V, skin_F, thickness: float) -> dict:
+    """The figures of one solid (V, F) with its outer faces (mask (m,) bool) on the skin (skin_V, skin_F)."""
+    from bolus_addon.core.solid import closed_report
+
+    rep = closed_report(V, F)
+    t = ray_thickness(skin_V, skin_F, V, F[outer], thickness)
+    t.pop("distances")
+    return {"triangles": int(len(F)), "closed": rep, "thickness": t,
+            "self_intersections": self_intersections(V, F)}
+
+
+# ----------------------------------------------------------------------------- Solidify
+
+
+def solidify_arrays(bpy, V, F, mode: str, thickness: float = THICKNESS_MM, timer=None) -> dict:
+    """Blender's Solidify (complex, module doc) on the region (V, F): the evaluated solid as triangles.
+
+    Returns V2 (k,3), F2 (j,3) (polygons fan-triangulated), layer (j,) 0 skin layer, 1 offset layer, 2 rim,
+    src (j,) the source face of each triangle (-1 on the rim), seconds (the depsgraph evaluation alone, or what
+    ``timer`` returns: timer(fn) -> (result, stats))."""
+    import numpy as np
+
+    benchutil.clean_scene(bpy)
+    me = bpy.data.meshes.new("region")
+    me.from_pydata(np.asarray(V).tolist(), [], np.asarray(F).tolist())
+    me.update()
+    at = me.attributes.new("bolus_bench_src", "INT", "FACE")
+    at.data.foreach_set("value", np.arange(len(F), dtype=np.int32))
+    ob = bpy.data.objects.new("region", me)
+    bpy.context.scene.collection.objects.link(ob)
+    md = ob.modifiers.new("solidify", "SOLIDIFY")
+    md.solidify_mode = "NON_MANIFOLD"
+    md.nonmanifold_thickness_mode = mode
+    md.thickness = thickness
+    md.offset = 1.0
+    md.use_rim = True
+    md.use_rim_only = False
+    md.use_even_offset = True
+    md.show_viewport = False
+    dg = bpy.context.evaluated_depsgraph_get()
+    dg.update()
+    md.show_viewport = True
+    gc.collect()
+    if timer is None:
+        t0 = time.perf_counter()
+        dg.update()
+        stats = {"seconds": time.perf_counter() - t0}
+    else:
+        _, stats = timer(dg.update)
+    ev = ob.evaluated_get(dg)
+    m2 = ev.data
+    n, np_ = len(m2.vertices), len(m2.polygons)
+    co = np.empty(n * 3)
+    m2.vertices.foreach_get("co", co)
+    corners = np.empty(len(m2.loops), dtype=np.int64)
+    m2.loops.foreach_get("vertex_index", corners)
+    sizes = np.empty(np_, dtype=np.int64)
+    m2.polygons.foreach_get("loop_total", sizes)
+    src = np.empty(np_, dtype=np.int32)
+    m2.attributes["bolus_bench_src"].data.foreach_get("value", src)
+    if np_ == len(F):
+        raise RuntimeError("the Solidify modifier was not evaluated (as many faces out as in)")
+    from bolus_addon.core.topology import triangulate_polygons
+
+    V2 = co.reshape(-1, 3)
+    F2, tri_poly = triangulate_polygons(corners, sizes)
+    # the skin layer keeps the region's positions (offset = +1): its triangles' centroids sit on their source's
+    # (within Blender's float32 coordinates: 1e-3 t is far below the offset layer's t, far above float32's error)
+    C = np.asarray(V)[np.asarray(F)].mean(axis=1)
+    tsrc = src[tri_poly].astype(np.int64)
+    is_tri = sizes[tri_poly] == 3
+    on_skin = np.linalg.norm(V2[F2].mean(axis=1) - C[np.clip(tsrc, 0, len(F) - 1)], axis=1) < 1e-3 * thickness
+    layer = np.full(len(F2), 2, dtype=np.int8)
+    layer[is_tri & on_skin] = 0
+    layer[is_tri & ~on_skin] = 1
+    tsrc[layer == 2] = -1
+    bpy.data.objects.remove(ob)
+    bpy.data.meshes.remove(me)
+    return {"V": V2, "F": F2, "layer": layer, "src": tsrc, **stats}
+
+
+# ----------------------------------------------------------------------------- child processes
+
+
+def _status_kb(key: str) -> int:
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith(key + ":"):
+                return int(line.split()[1])
+    return 0
+
+
+def measured(fn):
+    """(fn(), stats): wall time of the call and its peak memory (VmHWM reset before it, minus VmRSS before)."""
+    gc.collect()
+    rss0 = _status_kb("VmRSS")
+    reset = benchutil.reset_peak_rss()
+    t0 = time.perf_counter()
+    res = fn()
+    dt = time.perf_counter() - t0
+    hwm = _status_kb("VmHWM")
+    return res, {"seconds": dt, "rss_before_mb": rss0 / 1024.0, "peak_mb": hwm / 1024.0,
+                 "peak_delta_mb": (hwm - rss0) / 1024.0 if reset else None}
+
+
+def work_ours(data: dict, job: dict) -> tuple[dict, dict]:
+    from bolus_addon.core.shell import make_shell
+
+    V, F = data["V"], data["F"]
+    sh, st = measured(lambda: make_shell(V, F, thickness=job["thickness"], resolution=job["resolution"]))
+    st.update(volume_mm3=float(sh.volume_mm3), holes=int(sh.holes), warnings=list(sh.warnings),
+              self_thickness=[float(sh.thickness_min), float(sh.thickness_mean), float(sh.thickness_max)])
+    return {"V": sh.V, "F": sh.F, "side": sh.side}, st
+
+
+def work_solidify(data: dict, job: dict) -> tuple[dict, dict]:
+    import bpy
+
+    with benchutil.captured_output():
+        r = solidify_arrays(bpy, data["V"], data["F"], job["mode"], job["thickness"], timer=measured)
+    st = {k: r.pop(k) for k in list(r) if k not in ("V", "F", "layer", "src")}
+    st["bpy"] = bpy.app.version_string
+    return r, st
+
+
+def work_parts(data: dict, job: dict) -> tuple[dict, dict]:
+    """Segment the skin, split the shell, orient the shell and each part (module doc)."""
+    import numpy as np
+
+    from bolus_addon.core.print_orientation import orient
+    from bolus_addon.core.print_parts import orient_print_parts
+    from bolus_addon.core.print_segmentation import print_segment
+    from bolus_addon.core.solid_parts import split_solid
+
+    V, F, side, sV, sF = data["V"], data["F"], data["side"], data["skin_V"], data["skin_F"]
+    labels, st_seg = measured(lambda: print_segment(sV, sF, parts=job["parts"], method="abcut", rng=0))
+    sp, st = measured(lambda: split_solid(V, F, side, sV, sF, labels, clearance=job["clearance"]))
+    whole, st_w = measured(lambda: orient(V, F))
+    plan, st_p = measured(lambda: orient_print_parts(sp.V, sp.F, sp.labels, whole=False))
+    st.update(segment_seconds=st_seg["seconds"], skin_parts=int(len(np.unique(labels))),
+              orient_whole_seconds=st_w["seconds"], orient_parts_seconds=st_p["seconds"],
+              whole_support_mm3=float(whole.support_volume), whole_direction=[float(x) for x in whole.direction],
+              parts_support_mm3=[float(r.orientation.support_volume) for r in plan.parts],
+              part_directions=[[float(x) for x in r.orientation.direction] for r in plan.parts],
+              volumes_mm3=[float(v) for v in sp.volumes_mm3], warnings=list(sp.warnings),
+              joints=[{"parts": [int(p) for p in j.parts], "area_mm2": float(j.area_mm2),
+                       "connectors": len(j.connectors), "note": j.note} for j in sp.joints])
+    return {"V": sp.V, "F": sp.F, "labels": sp.labels, "side": sp.side}, st
+
+
+WORKERS = {"ours": work_ours, "solidify": work_solidify, "parts": work_parts}
+
+
+def worker(job_path: str) -> int:
+    """Child process: run one job (JSON: kind, input .npz, output .npz, settings), write arrays + stats."""
+    import numpy as np
+
+    job = json.loads(Path(job_path).read_text())
+    with np.load(job["input"]) as z:
+        data = {k: z[k] for k in z.files}
+    out, stats = WORKERS[job["kind"]](data, job)
+    np.savez(job["output"], stats=np.array(json.dumps(stats, default=float)), **out)
+    return 0
+
+
+def run_worker(kind: str, arrays: dict, tmp: Path, **settings) -> tuple[dict, dict]:
+    """Run one job in a child process (this interpreter): (its arrays, its stats); RuntimeError with its output
+    when it fails."""
+    import numpy as np
+
+    tag = f"{kind}_{len(list(tmp.iterdir()))}"
+    inp, outp, jobp = tmp / f"{tag}_in.npz", tmp / f"{tag}_out.npz", tmp / f"{tag}.json"
+    np.savez(inp, **arrays)
+    jobp.write_text(json.dumps({"kind": kind, "input": str(inp), "output": str(outp), **settings}))
+    try:
+        p = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker", str(jobp)],
+                           capture_output=True, text=True, timeout=WORKER_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        raise RuntimeError(f"{kind} did not finish within {WORKER_TIMEOUT_S} s") from None
+    if p.returncode != 0:
+        tail = [ln for ln in (p.stderr or p.stdout).strip().splitlines() if ln.strip()]
+        raise RuntimeError(tail[-1] if tail else f"{kind} worker exited with {p.returncode}")
+    with np.load(outp) as z:
+        out = {k: z[k] for k in z.files if k != "stats"}
+        stats = json.loads(str(z["stats"]))
+    for f in (inp, outp, jobp):
+        f.unlink(missing_ok=True)
+    return out, stats
+
+
+# ----------------------------------------------------------------------------- one region
+
+
+def have(module: str, name: str) -> bool:
+    import importlib
+
+    try:
+        return hasattr(importlib.import_module(f"bolus_addon.core.{module}"), name)
+    except ImportError:
+        return False
+
+
+def bench_region(region: dict, args, tmp: Path) -> dict:
+    import numpy as np
+
+    from bolus_addon.core.solid import SIDE_OUTER
+
+    name, V, F = region["name"], region["V"], region["F"]
+    t = THICKNESS_MM
+    print(f"\n== {name}: {region['how']}")
+    row = {"region": name, "how": region["how"], "faces": int(len(F)), "runs": [], "parts": None}
+    skin = {"V": V, "F": F}
+    shells = {}
+    for res in args.resolutions:
+        key = f"ours {res:g} mm"
+        try:
+            out, st = run_worker("ours", skin, tmp, thickness=t, resolution=res)
+            m = measure_solid(out["V"], out["F"], out["side"] == SIDE_OUTER, V, F, t)
+            shells[res] = out
+            run = {"method": key, **st, **m, "folded": None}
+        except Exception as exc:
+            run = benchutil.error_row("method", key, exc)
+        row["runs"].append(run)
+        print_run(run, t)
+    for key, mode in SOLIDIFY_MODES:
+        try:
+            out, st = run_worker("solidify", skin, tmp, thickness=t, mode=mode)
+            off = out["layer"] == 1
+            m = measure_solid(out["V"], out["F"], off, V, F, t)
+            m["folded"] = folded_triangles(out["V"], out["F"][off], out["src"][off], V, F)
+            m["offset_triangles"] = int(off.sum())
+            vol = m["closed"]["volume_mm3"]
+            run = {"method": key, **st, **m, "volume_mm3": vol}
+        except Exception as exc:
+            run = benchutil.error_row("method", key, exc)
+        row["runs"].append(run)
+        print_run(run, t)
+    if not have("solid_parts", "split_solid"):
+        row["parts"] = {"note": "core.solid_parts.split_solid is not there yet: parts not benchmarked"}
+        print(f"   parts: {row['parts']['note']}")
+        return row
+    res = args.parts_resolution
+    if res not in shells:
+        row["parts"] = {"note": f"no {res:g} mm shell to split"}
+        print(f"   parts: {row['parts']['note']}")
+        return row
+    sh = shells[res]
+    try:
+        out, st = run_worker("parts", {"V": sh["V"], "F": sh["F"], "side": sh["side"], "skin_V": V, "skin_F": F},
+                             tmp, parts=PARTS, clearance=PARTS_CLEARANCE_MM)
+        row["parts"] = {"resolution": res, **st, **parts_figures(out, sh)}
+    except Exception as exc:
+        row["parts"] = {"error": benchutil.error_row("parts", "parts", exc)["error"]}
+    print_parts(row["parts"])
+    return row
+
+
+def parts_figures(out: dict, shell: dict) -> dict:
+    """Closed? and volume of every part (core.solid.closed_report on its faces), their sum against the shell's."""
+    import numpy as np
+
+    from bolus_addon.core.solid import closed_report
+    from bolus_addon.core.topology import submesh
+
+    closed, vols = [], []
+    for p in np.unique(out["labels"]):
+        Fp, ids = submesh(out["F"], out["labels"] == p)
+        rep = closed_report(out["V"][ids], Fp)
+        closed.append(bool(rep["closed"]))
+        vols.append(float(rep["volume_mm3"]))
+    whole = closed_report(shell["V"], shell["F"])["volume_mm3"]
+    return {"part_count": len(vols), "parts_closed": closed, "part_volumes_measured_mm3": vols,
+            "shell_volume_mm3": float(whole), "volume_sum_ratio": float(sum(vols) / whole) if whole else None}
+
+
+# ----------------------------------------------------------------------------- output
+
+
+def _f(x, fmt="{:.2f}") -> str:
+    return "n/a" if x is None else fmt.format(x)
+
+
+def closed_text(rep: dict) -> str:
+    if rep["closed"]:
+        return "yes"
+    bits = [f"{rep[k]} {k.split('_')[0]}" for k in ("boundary_edges", "nonmanifold_edges", "inconsistent_edges")
+            if rep.get(k)]
+    return "no (" + ", ".join(bits) + " edges)" if bits else "no"
+
+
+def mem_text(r: dict) -> str:
+    d = r.get("peak_delta_mb")
+    return _f(d, "{:.0f}") if d is not None else f"<= {r['peak_mb']:.0f}"
+
+
+def print_run(r: dict, t: float) -> None:
+    if "error" in r:
+        return
+    th = r["thickness"]
+    print(f"   {r['method']}: {r['seconds']:.2f} s, peak +{mem_text(r)} MB, {r['triangles']} triangles, "
+          f"closed {closed_text(r['closed'])}, volume {r['closed']['volume_mm3'] / 1000:.2f} cm³, thickness "
+          f"{_f(th['min'])} / {_f(th['mean'])} / {_f(th['max'])} mm on {th['rays']} rays ({th['missed']} missed, "
+          f"{th['thin']} below {0.95 * t:g} mm), {r['self_intersections']} self-intersecting pairs"
+          + (f", {r['folded']} folded of {r['offset_triangles']} offset triangles" if r.get("folded") is not None
+             else ""))
+    for w in r.get("warnings", []) or []:
+        print(f"     warning: {w}")
+
+
+def print_parts(p: dict) -> None:
+    if "note" in p:
+        return
+    if "error" in p:
+        print(f"   parts FAILED: {p['error']}")
+        return
+    print(f"   parts ({p['resolution']:g} mm shell): segment {p['segment_seconds']:.2f} s, split_solid "
+          f"{p['seconds']:.2f} s (peak +{mem_text(p)} MB), {p['part_count']} parts, closed "
+          f"{sum(p['parts_closed'])}/{p['part_count']}, volumes {pct_text(p['volume_sum_ratio'])} of the shell's, "
+          f"{sum(j['connectors'] for j in p['joints'])} connectors on {len(p['joints'])} joints; support "
+          f"{sum(p['parts_support_mm3']):.0f} mm³ (parts, each in its best orientation) against "
+          f"{p['whole_support_mm3']:.0f} mm³ (whole shell)")
+    for j in p["joints"]:
+        if j["note"]:
+            print(f"     joint {j['parts']}: {j['note']}")
+    for w in p.get("warnings", []):
+        print(f"     warning: {w}")
+
+
+def pct_text(x) -> str:
+    return "n/a" if x is None else f"{100 * x:.2f} %"
+
+
+def shell_table(rows: list[dict], t: float) -> Table:
+    tab = Table([("region", "<"), ("method", "<"), ("time s", ">"), ("peak MB", ">"), ("triangles", ">"),
+                 ("closed", "<"), ("volume cm³", ">"), ("t min", ">"), ("t mean", ">"), ("t max", ">"),
+                 (f"rays < {0.95 * t:g} / missed", ">"), ("folded", ">"), ("self-int. pairs", ">")])
+    for row in rows:
+        if "error" in row:
+            tab.add_error(row["region"], row["error"])
+            continue
+        for r in row["runs"]:
+            first = f"{row['region']} ({row['faces']} tri)"
+            if "error" in r:
+                tab.add_error(f"{first}: {r['method']}", r["error"])
+                continue
+            th = r["thickness"]
+            tab.add(first, r["method"], f"{r['seconds']:.2f}", mem_text(r), r["triangles"], closed_text(r["closed"]),
+                    f"{r['closed']['volume_mm3'] / 1000:.2f}", _f(th["min"]), _f(th["mean"]), _f(th["max"]),
+                    f"{th['thin']} / {th['missed']} of {th['rays']}",
+                    "n/a" if r.get("folded") is None else f"{r['folded']} of {r['offset_triangles']}",
+                    r["self_intersections"])
+    return tab
+
+
+def parts_table(rows: list[dict]) -> Table:
+    tab = Table([("region", "<"), ("shell", ">"), ("parts", ">"), ("split s", ">"), ("peak MB", ">"),
+                 ("closed", ">"), ("Σ volume / shell", ">"), ("connectors", ">"), ("support parts mm³", ">"),
+                 ("support whole mm³", ">"), ("ratio", ">")])
+    for row in rows:
+        p = row.get("parts") if "error" not in row else None
+        if not p:
+            continue
+        if "note" in p or "error" in p:
+            tab.add_error(row["region"], p.get("note") or p.get("error"))
+            continue
+        sp, sw = sum(p["parts_support_mm3"]), p["whole_support_mm3"]
+        tab.add(row["region"], f"{p['resolution']:g} mm", p["part_count"], f"{p['seconds']:.2f}", mem_text(p),
+                f"{sum(p['parts_closed'])}/{p['part_count']}", pct_text(p["volume_sum_ratio"]),
+                sum(j["connectors"] for j in p["joints"]), f"{sp:.0f}", f"{sw:.0f}",
+                f"{sp / sw:.2f}" if sw > 0 else "n/a")
+    return tab
+
+
+def legend(args) -> str:
+    return (f"Shell {THICKNESS_MM:g} mm thick. Ours: `core.shell.make_shell(thickness={THICKNESS_MM:g}, "
+            f"resolution=r)` for r in {', '.join(f'{r:g}' for r in args.resolutions)} mm; the peer: Blender's "
+            "Solidify, complex mode (`NON_MANIFOLD`), `offset=+1`, rim filled, `use_even_offset`, thickness mode "
+            "EVEN or CONSTRAINTS (Blender's default), evaluated through the depsgraph. Each call runs alone in a "
+            "child process: time = the call alone, peak MB = the child's VmHWM during the call minus its RSS before "
+            "it. Closed: every edge has two faces with opposite directions (`core.solid.closed_report`). Thickness "
+            f"(SPEC, one measure for both): rays from the skin vertices farther than {THICKNESS_MM:g} mm from the "
+            "region's border, along the skin's vertex normal, to the first hit on the outer face (ours: "
+            "`SIDE_OUTER` faces; Solidify: its offset layer), `BVHTree.ray_cast`; missed = no hit within "
+            f"{RAY_MAX:g} t. Folded: offset-layer triangles whose normal turned against their source face's. "
+            "Self-intersecting pairs: `BVHTree.overlap` of the solid with itself, pairs sharing a vertex left out")
+
+
+def parts_legend() -> str:
+    return (f"Parts: the shell split into {PARTS} parts along the ABcut print segmentation of its skin "
+            f"(`print_segment(skin, {PARTS}, rng=0)`) by `core.solid_parts.split_solid` (SVM planes, peg/hole "
+            f"connectors, clearance {PARTS_CLEARANCE_MM:g} mm); split s = `split_solid` alone; closed: per part; "
+            "support (SPEC: projected overhang area x height) of the parts, each in its best orientation "
+            "(`print_orientation.orient`), against the whole shell's in its own best orientation")
+
+
+def markdown(rows: list[dict], args, argv) -> str:
+    regions = "; ".join(f"**{r['region']}**: {r['how']}" for r in rows if "how" in r)
+    out = ["## Printed bolus (`bench/shell_bench.py`)", "", benchutil.run_line("shell_bench.py", argv), "",
+           f"Regions: {regions}.", "", legend(args) + ".", "", shell_table(rows, THICKNESS_MM).markdown()]
+    pt = parts_table(rows)
+    if pt.rows:
+        out += ["", parts_legend() + ".", "", pt.markdown()]
+    return "\n".join(out)
+
+
+# ----------------------------------------------------------------------------- main
+
+
+def main(argv=None) -> int:
+    ap = benchutil.parser(__doc__, "the example nose region at 1.0 mm only", repeat=None)
+    ap.add_argument("--worker", metavar="JOB", help=argparse_hidden())
+    ap.add_argument("--only", metavar="NAME", action="append", default=[],
+                    help="bench only the regions whose name contains NAME (repeatable)")
+    args = ap.parse_args(argv)
+    if args.worker:
+        return worker(args.worker)
+    args.resolutions = RESOLUTIONS_QUICK if args.quick else RESOLUTIONS
+    args.parts_resolution = min(args.resolutions)
+
+    import bpy
+    import numpy as np
+    import scipy
+
+    t_start = time.perf_counter()
+    print(f"Bolus shell benchmark: bpy {bpy.app.version_string}, Python {platform.python_version()}, numpy "
+          f"{np.__version__}, scipy {scipy.__version__}, {os.cpu_count()} CPUs{'  [--quick]' if args.quick else ''}")
+    names = QUICK_REGIONS if args.quick else REGIONS
+    if args.only:
+        names = [n for n in names if any(o in n for o in args.only)]
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="shell_bench_") as td:
+        for name in names:
+            try:
+                region = make_region(name)
+            except Exception as exc:
+                rows.append(benchutil.error_row("region", name, exc))
+                continue
+            try:
+                rows.append(bench_region(region, args, Path(td)))
+            except Exception as exc:
+                rows.append(benchutil.error_row("region", name, exc))
+    total = time.perf_counter() - t_start
+    print("\n" + legend(args) + ".")
+    print(shell_table(rows, THICKNESS_MM).text())
+    pt = parts_table(rows)
+    if pt.rows:
+        print("\n" + parts_legend() + ".")
+        print(pt.text())
+    benchutil.finish(args, {"quick": args.quick, "thickness_mm": THICKNESS_MM,
+                            "resolutions_mm": list(args.resolutions), "units": "lengths mm, volumes mm³, seconds",
+                            "regions": rows}, total, markdown(rows, args, argv))
+    return 0
+
+
+def argparse_hidden():
+    import argparse
+
+    return argparse.SUPPRESS
+
+
+if __name__ == "__main__":
+    sys.exit(main())
