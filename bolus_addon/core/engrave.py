@@ -443,7 +443,7 @@ def _check_solid(V, F, side):
 
 
 def _check_text(text, what):
-    if not isinstance(text, TextOutline) or not text.polygons:
+    if not getattr(text, "polygons", None) or not hasattr(text, "width"):  # any TextOutline-like object
         raise BolusError(f"{what}: no text outline to engrave")
     for p in text.polygons:
         p = np.asarray(p, dtype=np.float64)
