@@ -42,9 +42,11 @@ import manifold3d as m3
 
 __all__ = [
     "CLEARANCE", "PEG_DIAMETER_FRACTION", "PEG_MIN_DIAMETER", "WALL_MIN", "PEG_LENGTH_FACTOR",
-    "PEG_MIN_LENGTH", "EMBED", "SEGMENTS",
+    "PEG_MIN_LENGTH", "EMBED", "SEGMENTS", "MAX_TILT_DEG",
     "Connector", "connector_size", "polygon_area", "plane_frame", "to_plane", "from_plane",
-    "section_of_triangles", "inscribed_radius", "cylinder", "place_centres", "add_joint_connectors",
+    "section_of_triangles", "inscribed_radius", "cylinder", "place_centres", "embed_length", "fit_in_wall",
+    "add_joint_connectors",
+    "joint_axes",
 ]
 
 CLEARANCE = 0.2  #: mm, hole radius - peg radius and hole depth - peg length (a free, not press, fit)
@@ -57,6 +59,10 @@ EMBED = 1.0  #: mm the peg cylinder reaches back into its own part (the union ov
 SEGMENTS = 32  #: sides of the peg and hole polygons (same angles: the clearance is even all round)
 SLACK = 0.5  #: mm: peg centres sit up to this much deeper than the bare minimum when the joint allows
 INSIDE_TOL = 1e-4  #: relative volume left outside a part that still counts as inside (round-off)
+MAX_TILT_DEG = 60.0  #: largest angle between a peg axis and the joint plane's normal
+SHIFTS = (0.5, -0.5)  #: mm: a site that fails where `fit_in_wall` puts it is tried this much either side
+MAX_SHIFT = 4.0  #: mm: farthest a site moves across the joint strip to centre its hole in the wall
+MARGIN = 0.1  #: mm `fit_in_wall` keeps spare on each side of the wall (the surface is curved)
 
 
 @dataclass
@@ -188,6 +194,43 @@ def cylinder(centre, axis, radius: float, start: float, end: float, segments: in
     return m3.Manifold.cylinder(float(end - start), float(radius), circular_segments=segments).transform(M.tolist())
 
 
+def joint_axes(normal, shell_normals) -> list[np.ndarray]:
+    """Peg axes to try on a joint, best first (all pegs of a joint stay parallel, so the
+    parts slide together along the axis).  ``normal`` (3,): the plane's unit normal;
+    ``shell_normals`` (k,3): the skin's normals at the peg sites (any sign).
+
+    Where the plane meets the shell obliquely, a peg along the normal runs out through the
+    shell's face; along the shell's tangent it stays inside the wall.  So: (1) with two
+    sites whose normals differ, the direction tangent at both (s1 x s2); (2) the normal
+    projected into the mean tangent plane; (3) the normal itself.  (1) and (2) only while
+    they stay within MAX_TILT_DEG of the normal."""
+    n = np.asarray(normal, dtype=np.float64)
+    S = np.asarray(shell_normals, dtype=np.float64).reshape(-1, 3)
+    S = S / np.maximum(np.linalg.norm(S, axis=1, keepdims=True), 1e-300)
+    cos_max = np.cos(np.radians(MAX_TILT_DEG))
+    axes = []
+    if len(S) >= 2:
+        a = np.cross(S[0], S[1])
+        if np.linalg.norm(a) > np.sin(np.radians(10.0)):
+            a /= np.linalg.norm(a)
+            a = a if a @ n >= 0 else -a
+            if a @ n >= cos_max:
+                axes.append(a)
+    if len(S):
+        sbar = (S * np.where(S @ S[0] < 0, -1.0, 1.0)[:, None]).sum(axis=0)
+        if np.linalg.norm(sbar) > 0:
+            sbar /= np.linalg.norm(sbar)
+            d = n - (n @ sbar) * sbar
+            if abs(n @ sbar) >= 0.05 and np.linalg.norm(d) >= cos_max:
+                axes.append(d / np.linalg.norm(d))
+    axes.append(n)
+    out = []
+    for a in axes:
+        if all(a @ b < np.cos(np.radians(1.0)) for b in out):
+            out.append(a)
+    return out
+
+
 def _outside(A: m3.Manifold, B: m3.Manifold) -> float:
     """Volume (mm^3) of A outside B."""
     return float((A - B).volume())
@@ -198,61 +241,139 @@ def _overlap(A: m3.Manifold, others: list) -> float:
     return sum(float((A ^ B).volume()) for B in others)
 
 
-def _try_connector(peg_part, hole_part, centre, axis, r, length, clearance, keep_peg, keep_hole):
-    """(new peg part, new hole part, peg, hole, anchor, guard) or a reason string."""
-    anchor = cylinder(centre, axis, r + WALL_MIN, -EMBED, 0.0)
-    base = cylinder(centre, axis, r, -EMBED, 0.0)
+def embed_length(r: float, clearance: float, cos_tilt: float) -> float:
+    """How far (mm) peg and hole cylinders reach back behind the joint plane along their axis:
+    EMBED, plus what a tilted axis needs for the cylinder's end to clear the plane all round."""
+    cos_tilt = min(1.0, max(float(cos_tilt), 1e-3))
+    return EMBED + (r + clearance + WALL_MIN) * np.sqrt(1.0 - cos_tilt**2) / cos_tilt
+
+
+def _local(part: m3.Manifold, centre, half: float) -> m3.Manifold:
+    """The part clipped to a cube of half-size ``half`` around ``centre`` (the checks of one
+    connector then work on a few hundred triangles instead of the whole part)."""
+    box = m3.Manifold.cube((2 * half, 2 * half, 2 * half), True).translate(tuple(np.asarray(centre, float)))
+    return part ^ box
+
+
+def _try_connector(peg_part, hole_part, centre, axis, nrm, off, r, length, clearance, keep_peg, keep_hole):
+    """(peg, hole, anchor, guard) or a reason string.  The plane nrm . x + off = 0 has the
+    hole part on its + side; peg_part / hole_part may be clipped around the centre."""
+    e = embed_length(r, clearance, float(axis @ nrm))
+    peg_side, hole_side = (tuple(-nrm), float(off)), (tuple(nrm), float(-off))
+    base = cylinder(centre, axis, r, -e, 0.0).trim_by_plane(*peg_side)
     if _outside(base, peg_part) > INSIDE_TOL * base.volume():
         return "the peg's base is not inside its part"
-    guard = cylinder(centre, axis, r + clearance + WALL_MIN, 0.0, length + clearance + WALL_MIN)
+    guard = cylinder(centre, axis, r + clearance + WALL_MIN, -e,
+                     length + clearance + WALL_MIN).trim_by_plane(*hole_side)
     if _outside(guard, hole_part) > INSIDE_TOL * guard.volume():
         return "the hole and its wall would not stay inside the other part"
+    anchor = cylinder(centre, axis, r + WALL_MIN, -e, 0.0).trim_by_plane(*peg_side)
     if _overlap(guard, keep_hole) > INSIDE_TOL * guard.volume() or \
             _overlap(anchor, keep_peg) > INSIDE_TOL * anchor.volume():
         return "it would run into another connector"
-    peg = cylinder(centre, axis, r, -EMBED, length)
-    hole = cylinder(centre, axis, r + clearance, -EMBED, length + clearance)
-    new_peg = peg_part + peg
-    added = new_peg.volume() - peg_part.volume()
+    peg = cylinder(centre, axis, r, -e, length)
+    added = (peg_part + peg).volume() - peg_part.volume()
     if abs(added - polygon_area(r) * length) > INSIDE_TOL * peg.volume() + 1e-6:
         return "the peg would run into its own part"
-    return new_peg, hole_part - hole, peg, hole, anchor, guard
+    return peg, cylinder(centre, axis, r + clearance, -e, length + clearance), anchor, guard
 
 
-def add_joint_connectors(parts: list, pair: tuple, normal, candidates: list, r: float, length: float,
-                         clearance: float = CLEARANCE, ids: set | None = None, keepout: dict | None = None):
-    """Put pegs and holes on the joint of parts ``pair`` = (i, j) whose plane normal (3,)
-    points from i into j.  ``candidates``: one (t,3) array of centres on the plane per
-    connector, tried in order (each at full, then half length).  ``parts``: list of
-    ``manifold3d.Manifold``, updated in place.  Connector c (0, 1) has its peg on
-    pair[c % 2], its hole in the other.  ``ids`` collects the original ids of the cylinders
-    (the faces they leave are connector faces); ``keepout`` {part: [Manifold]} the space
-    each part's earlier connectors need (holes with their walls, peg bases), updated.
-    Returns (connectors, notes)."""
-    normal = np.asarray(normal, dtype=np.float64)
+def _lengths(length: float) -> list[float]:
+    return list(dict.fromkeys(max(PEG_MIN_LENGTH, f * length) for f in (1.0, 0.75, 0.5)))
+
+
+def fit_in_wall(axis, normal, s, h0: float, t: float, r: float, clearance: float, length: float):
+    """Where across the wall and how long a connector fits, from the local wall alone.
+
+    Locally the shell is a slab 0 <= (x - x_inner) . s <= t (s (3,) unit into the material,
+    t the wall thickness), the centre sits at height h0.  Along ``axis`` the hole (with its
+    wall, radius r + clearance + WALL_MIN, to depth length + clearance + WALL_MIN) and the
+    peg's base drift across the slab by axis . s per mm.  Returns (shift, L, u): the centre
+    moved by ``shift`` along u (unit, in the plane) puts that range in the middle of the
+    wall with the longest L of `_lengths` that fits (MARGIN to spare each side), or None."""
+    axis, normal, s = (np.asarray(v, dtype=np.float64) for v in (axis, normal, s))
+    cs = float(axis @ s)
+    sn = float(np.sqrt(max(0.0, 1.0 - cs**2)))
+    e = embed_length(r, clearance, float(axis @ normal))
+    rho = r + clearance + WALL_MIN
+    u = s - (s @ normal) * normal
+    g = float(np.linalg.norm(u))
+    for L in _lengths(length):
+        D = L + clearance + WALL_MIN
+        lo = min(min(0.0, D * cs) - rho * sn, min(-e * cs, 0.0) - r * sn)
+        hi = max(max(0.0, D * cs) + rho * sn, max(-e * cs, 0.0) + r * sn)
+        if hi - lo <= t - 2.0 * MARGIN:
+            h = 0.5 * (t - (hi - lo)) - lo
+            if g < 0.2:  # the plane nearly parallel to the wall: shifting in it does not move across
+                return 0.0, L, normal * 0.0
+            return (h - h0) / g, L, u / g
+    return None
+
+
+def add_joint_connectors(parts: list, pair: tuple, plane, axis, candidates: list, r: float, length: float,
+                         clearance: float = CLEARANCE, ids: set | None = None, keepout: dict | None = None,
+                         wall=None):
+    """Put pegs and holes on the joint of parts ``pair`` = (i, j), on the plane
+    ``plane`` = (normal (3,) unit from i into j, offset).  ``axis`` (3,) unit, axis . normal
+    > 0: the direction every peg of the joint points (parallel, so the parts slide together).
+    ``candidates``: one (t,3) array of centres on the plane per connector, tried in order;
+    ``wall``: None or a callable site (3,) -> (s (3,) unit into the material, height of the
+    site above the inner face, wall thickness) used by `fit_in_wall` to move each site
+    across the joint strip and choose the length (where the plane meets the shell
+    obliquely, a hole centred in the wall at the plane leaves it deeper in); then SHIFTS mm
+    either side.  ``parts``: list of ``manifold3d.Manifold``, updated in place.  Connector
+    c (0, 1) has its peg on pair[c % 2], its hole in the other.  ``ids`` collects the
+    original ids of the cylinders (the faces they leave are connector faces); ``keepout``
+    {part: [Manifold]} the space each part's earlier connectors need (holes with their
+    walls, peg bases), updated.  Returns (connectors, notes).
+
+    A peg adds exactly polygon_area(r) * length to its part and its hole removes
+    polygon_area(r + clearance) * (length + clearance) from the other (the plane passes
+    through the axis point and the polygon is centrally symmetric, so a tilted axis
+    changes neither)."""
+    normal = np.asarray(plane[0], dtype=np.float64)
+    offset = float(plane[1])
+    axis = np.asarray(axis, dtype=np.float64)
     keepout = {} if keepout is None else keepout
     done, notes = [], []
+    e = embed_length(r, clearance, float(axis @ normal))
     for c, cand in enumerate(candidates):
+        sgn = 1.0 if c % 2 == 0 else -1.0
         p, h = (pair[0], pair[1]) if c % 2 == 0 else (pair[1], pair[0])
-        axis = normal if c % 2 == 0 else -normal
         cand = np.asarray(cand, dtype=np.float64).reshape(-1, 3)
         made, reason = None, "it would sit too close to the other connector"
-        for x in cand:
-            if any(np.linalg.norm(x - d.centre) < 2.0 * (r + clearance) + WALL_MIN for d in done):
-                continue
-            for L in dict.fromkeys([length, max(PEG_MIN_LENGTH, 0.5 * length)]):
-                out = _try_connector(parts[p], parts[h], x, axis, r, L, clearance,
-                                     keepout.get(p, []), keepout.get(h, []))
+        for x0 in cand:
+            trials = [(x0, L) for L in _lengths(length)]
+            if wall is not None:
+                s, h0, t = wall(x0)
+                fit = fit_in_wall(sgn * axis, sgn * normal, s, h0, t, r, clearance, length)
+                if fit is None:
+                    reason = f"the wall ({t:.1f} mm) is too thin for it across the joint"
+                    continue
+                dlt, L, u = fit
+                if abs(dlt) > MAX_SHIFT:
+                    reason = "it would have to move too far across the joint"
+                    continue
+                x1 = x0 + dlt * u
+                trials = [(x1, L)] + [(x1 + d * u, L) for d in SHIFTS] + [(x1, l) for l in _lengths(length) if l < L]
+            half = length + clearance + WALL_MIN + e + r + clearance + WALL_MIN + MAX_SHIFT + 1.0
+            P_loc, H_loc = _local(parts[p], x0, half), _local(parts[h], x0, half)
+            for x, L in trials:
+                if any(np.linalg.norm(x - d.centre) < 2.0 * (r + clearance) + WALL_MIN for d in done):
+                    continue
+                out = _try_connector(P_loc, H_loc, x, sgn * axis, sgn * normal, sgn * offset, r, L,
+                                     clearance, keepout.get(p, []), keepout.get(h, []))
                 if isinstance(out, str):
                     reason = out
                     continue
-                parts[p], parts[h], peg, hole, anchor, guard = out
+                peg, hole, anchor, guard = out
+                parts[p], parts[h] = parts[p] + peg, parts[h] - hole
                 keepout.setdefault(p, []).append(anchor)
                 keepout.setdefault(h, []).append(guard)
                 if ids is not None:
                     for cyl in (peg, hole):
                         ids.update(int(i) for i in np.asarray(cyl.to_mesh64().run_original_id))
-                made = Connector((int(p), int(h)), x.copy(), axis.copy(), float(r), float(r + clearance),
+                made = Connector((int(p), int(h)), x.copy(), sgn * axis, float(r), float(r + clearance),
                                  float(L), float(L + clearance))
                 break
             if made is not None:

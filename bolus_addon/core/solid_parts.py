@@ -49,7 +49,7 @@ import manifold3d as m3
 from . import connectors as conn
 from .connectors import Connector
 from .errors import BolusError
-from .solid import SIDE_CONNECTOR, SIDE_CUT, SIDE_INNER, SIDE_NAMES, from_manifold, to_manifold
+from .solid import SIDE_CONNECTOR, SIDE_CUT, SIDE_INNER, SIDE_OUTER, from_manifold, to_manifold
 from .topology import MeshTopology, check_mesh
 
 __all__ = ["Connector", "Joint", "SolidParts", "skin_neighbours", "svm_plane", "split_solid",
@@ -59,7 +59,7 @@ SVM_C = 1e3  #: LinearSVC's C on unit-RMS coordinates: close to the hard margin 
 MAX_SVM_POINTS = 5000  #: per class; larger parts are subsampled (rng)
 MAX_EXTRA_PLANES = 4  #: separating planes added for cells of two parts in one arrangement region
 MIN_JOINT_AREA = 1.0  #: mm^2: two parts touching on less of a plane have no joint (a corner)
-CORNER_FRACTION = 0.1  #: a pair's face on a second plane under 10 % of its main joint is a corner, no connector
+WRONG_SIDE_WARN = 0.05  #: warn when a joint plane leaves more than 5 % of the two parts' skin vertices on the wrong side
 VOLUME_RTOL = 1e-6  #: parts' volumes must add up to the solid's to this relative round-off
 
 
@@ -73,7 +73,8 @@ class Joint:
     area_mm2: float
     connectors: list = field(default_factory=list)  #: [Connector]
     note: str | None = None  #: why it has fewer than two connectors (None: it has two)
-    thickness_mm: float = float("nan")  #: diameter of the largest circle inside the joint face
+    thickness_mm: float = float("nan")  #: wall thickness at the joint (median over the joint face's edge;
+    #: without inner/outer faces: the diameter of the largest circle inside the joint face)
     plane: int = -1  #: index of its plane among `SolidParts.planes`
 
     def as_dict(self) -> dict:
@@ -327,7 +328,7 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
         vj = np.unique(skin_F[lab == j])
         only_i, only_j = np.setdiff1d(vi, vj), np.setdiff1d(vj, vi)
         n, off, wrong = svm_plane(skin_V[only_i if len(only_i) else vi], skin_V[only_j if len(only_j) else vj], rng)
-        if wrong > 0.02:
+        if wrong > WRONG_SIDE_WARN:
             warnings.append(f"the joint plane between parts {i} and {j} leaves {100 * wrong:.1f} % of their skin "
                             "on the other part's side: their border is far from straight")
         plane_rows.append(np.r_[n, off])
@@ -431,13 +432,14 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
     joints = _joints(part_M, planes, plane_of_id)
     conn_ids: set = set()
     keepout: dict = {}
+    wall = _wall_probe(V, F, side)
     for J in sorted(joints, key=lambda J: -J.area_mm2):
         if J.note is not None:  # a corner face next to the pair's main joint
             continue
         if not connectors:
             J.note = "connectors not asked for"
             continue
-        _connect(J, part_M, planes, plane_of_id, clearance, conn_ids, keepout, warnings)
+        _connect(J, part_M, planes, clearance, conn_ids, keepout, tree, skin_topo.face_normals, wall, warnings)
     report(0.95, "faces")
     Vs, Fs, labels, sides = [], [], [], []
     base = 0
@@ -491,31 +493,78 @@ def _joints(part_M, planes, plane_of_id) -> list[Joint]:
                 J = Joint((a, b), sgn * planes[p, :3].copy(), float(sgn * planes[p, 3]), area, plane=int(p))
                 J._section = inter
                 joints.append(J)
-    for J in joints:  # a pair touching on several planes: the small extra faces are corners of the main joint
+    for J in joints:  # a pair touching on several planes: its largest face carries the connectors
         main = max((K for K in joints if K.parts == J.parts), key=lambda K: K.area_mm2)
-        if J is not main and J.area_mm2 < CORNER_FRACTION * main.area_mm2:
-            J.note = (f"a {J.area_mm2:.0f} mm² corner next to the joint of parts {J.parts[0]} and {J.parts[1]} "
-                      "on another plane: no connector")
+        if J is not main:
+            J.note = (f"a second, {J.area_mm2:.0f} mm² face of parts {J.parts[0]} and {J.parts[1]} on another plane: "
+                      "their main joint carries the connectors")
             J.__dict__.pop("_section", None)
     return joints
 
 
-def _connect(J: Joint, part_M, planes, plane_of_id, clearance, conn_ids, keepout, warnings):
+def _wall_probe(V, F, side):
+    """Callable x (3,) -> (s (3,) unit into the material, height of x above the inner face,
+    wall thickness), from the solid's nearest inner and outer faces; None when the solid
+    has no inner or outer faces."""
+    areas, cents, cr = _areas_centroids(V, F)
+    inner, outer = (side == SIDE_INNER) & (areas > 0), (side == SIDE_OUTER) & (areas > 0)
+    if not inner.any() or not outer.any():
+        return None
+    Cin, Nin = cents[inner], -cr[inner] / (2.0 * areas[inner])[:, None]  # inner faces face the skin
+    Cout = cents[outer]
+    tin, tout = cKDTree(Cin), cKDTree(Cout)
+
+    def wall(x):
+        x = np.asarray(x, dtype=np.float64)
+        i = tin.query(x)[1]
+        o = tout.query(x)[1]
+        s = Nin[i]
+        return s, float((x - Cin[i]) @ s), float((Cout[o] - Cin[i]) @ s)
+
+    return wall
+
+
+def _connect(J: Joint, part_M, planes, clearance, conn_ids, keepout, skin_tree, skin_normals, wall, warnings):
     p = J.plane
     section = J.__dict__.pop("_section")
     origin, U = conn.plane_frame(planes[p, :3], planes[p, 3])
     R = conn.inscribed_radius(section)
-    J.thickness_mm = 2.0 * R
+    if wall is not None:
+        B = conn._vertices(section)
+        B = B[:: max(1, len(B) // 200)]
+        J.thickness_mm = float(np.median([wall(x)[2] for x in conn.from_plane(B, origin, U)]))
+    else:
+        J.thickness_mm = 2.0 * R
     r, length, need = conn.connector_size(J.thickness_mm, clearance)
     i, j = J.parts
     if J.thickness_mm < need:
-        J.note = (f"too thin for a peg: the joint is {J.thickness_mm:.1f} mm thick, a {2 * r:.1f} mm peg with "
-                  f"{clearance:g} mm clearance and {conn.WALL_MIN:g} mm walls needs {need:.1f} mm")
+        J.note = (f"too thin for a peg: the wall at the joint is {J.thickness_mm:.1f} mm thick, a {2 * r:.1f} mm peg "
+                  f"with {clearance:g} mm clearance and {conn.WALL_MIN:g} mm walls needs {need:.1f} mm")
+    elif R < r + clearance + conn.WALL_MIN:
+        J.note = (f"too small for a peg: the joint face is {2 * R:.1f} mm across at its widest, a {2 * r:.1f} mm peg "
+                  f"with {clearance:g} mm clearance and {conn.WALL_MIN:g} mm walls needs {need:.1f} mm")
+    if J.note is not None:
         warnings.append(f"joint between parts {i} and {j} left plain: {J.note}")
         return
     C2 = conn.place_centres(section, r, clearance, inscribed=R)
     C3 = [conn.from_plane(c, origin, U) for c in C2]
-    made, notes = conn.add_joint_connectors(part_M, J.parts, J.normal, C3, r, length, clearance, conn_ids, keepout)
+    sites = np.array([c[0] for c in C3]).reshape(-1, 3)
+    _, near = skin_tree.query(sites) if len(sites) else (None, np.zeros(0, np.int64))
+    best = None
+    axes = conn.joint_axes(J.normal, skin_normals[near])
+    for axis in axes[-1:] + axes[:-1]:  # the plane normal first: pegs square to the joint face
+        trial_parts, trial_keep, trial_ids = list(part_M), {q: list(v) for q, v in keepout.items()}, set()
+        made, notes = conn.add_joint_connectors(trial_parts, J.parts, (J.normal, J.offset), axis, C3, r, length,
+                                                clearance, trial_ids, trial_keep, wall)
+        if best is None or len(made) > len(best[0]):
+            best = (made, notes, trial_parts, trial_keep, trial_ids)
+        if len(made) == len(C3):
+            break
+    made, notes, trial_parts, trial_keep, trial_ids = best
+    part_M[:] = trial_parts
+    keepout.clear()
+    keepout.update(trial_keep)
+    conn_ids.update(trial_ids)
     J.connectors = made
     if len(C2) == 1:
         notes.insert(0, "one connector only: the joint is too short for two")
