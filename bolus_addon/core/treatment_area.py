@@ -244,7 +244,9 @@ def _finish(V, F, st, inside, cav, d, p, f0, how_far, radius) -> Area:
     _, comp = topo.face_components(np.where(inside, 1, np.where(cav, 2, 0)))
     selected = inside & (comp == comp[src])
     _, comp01 = topo.face_components(np.where(inside | cav, 1, 0))
-    cavity = cav & (comp01 == comp01[src])
+    # left out within the radius: cavity faces and the open specks among them (a pocket's floor seen through
+    # its mouth) that are not edge-connected to the area
+    cavity = (inside | cav) & (comp01 == comp01[src]) & ~selected
     A = topo.areas
     split = np.zeros(len(F), dtype=bool)
     split[st.parent[~st.unchanged]] = True
