@@ -175,6 +175,9 @@ class _Surface:
         bounds = _sample_faces(V, F, np.nonzero(np.isin(side, _BOUNDING_SIDES))[0], SPOT_SPACING_MM)[0]
         self.bounds = bounds[_thin_out(bounds, SPOT_SPACING_MM)]
         self.M, self.sid = _tracked_manifold(V, F, what)
+        self.centroids = T.mean(axis=1)
+        self.ctree = cKDTree(self.centroids)
+        self.frad = float(np.linalg.norm(T - self.centroids[:, None], axis=2).max())
         Vc = V - V.mean(axis=0)
         self.axes = np.linalg.svd(Vc, full_matrices=False)[2] if len(V) >= 3 else np.eye(3)
 
@@ -186,9 +189,9 @@ class _Surface:
         return N, c
 
     def project(self, p, n0, Q, reach):
-        """The first face met coming from outside along n0 through each point Q (k,3) of the plane
-        through p normal to n0, within ``reach`` mm above / below it: face (k,) (-1: none), the
-        hit X (k,3), barycentrics (k,3)."""
+        """The first face facing n0 met coming from outside along n0 through each point Q (k,3) of
+        the plane through p normal to n0, within ``reach`` mm above / below it: face (k,) (-1: none),
+        the hit X (k,3), barycentrics (k,3)."""
         k = len(Q)
         face = np.full(k, -1, dtype=np.int64)
         X = np.full((k, 3), np.nan)
@@ -196,11 +199,16 @@ class _Surface:
         r = _unit(np.cross(n0, [1.0, 0.0, 0.0] if abs(n0[0]) < 0.9 else [0.0, 1.0, 0.0]))
         u = np.cross(n0, r)
         B = np.stack([r, u], axis=1)
-        h = (self.V - p) @ n0
-        near = np.nonzero(np.any(np.abs(h[self.F]) <= reach, axis=1))[0]
-        if len(near) == 0 or k == 0:
+        if k == 0:
             return face, X, bary
-        qi, ti, b = _locate_2d((Q - p) @ B, ((self.V - p) @ B)[self.F[near]])
+        rho = float(np.linalg.norm(Q - p, axis=1).max())
+        near = np.asarray(self.ctree.query_ball_point(p, np.hypot(rho, reach) + self.frad), dtype=np.int64)
+        # faces seen from outside along n0 (a fold over the spot shows up as a jump in height)
+        near = near[(np.abs((self.centroids[near] - p) @ n0) <= reach + self.frad) & (self.fn[near] @ n0 > 0)]
+        if len(near) == 0:
+            return face, X, bary
+        T = self.V[self.F[near]] - p
+        qi, ti, b = _locate_2d((Q - p) @ B, T @ B)
         if len(qi) == 0:
             return face, X, bary
         ti = near[ti]
@@ -242,6 +250,7 @@ class _Spot:
     height: float       # cap height, mm
     centre: np.ndarray  # (2,) centre of the text's box in text units x height
     footprint: np.ndarray  # (s,3) surface points under the box and margin
+    reach: float        # how far above / below the tangent plane the face was looked for
 
 
 class _NoFit(Exception):
@@ -267,7 +276,7 @@ def _fit(surf: _Surface, p, n0, up, text, height, depth, taken=()):
     ys = np.linspace(-half[1], half[1], int(np.ceil(2 * half[1] / step)) + 1)
     gx, gy = (g.ravel() for g in np.meshgrid(xs, ys, indexing="ij"))
     Q = p + gx[:, None] * r + gy[:, None] * up
-    reach = float(np.hypot(*half)) + 10.0
+    reach = float(np.hypot(*half)) + 2.0  # the face tilts at most MAX_TILT_DEG < 45 degrees
     face, X, bary = surf.project(p, n0, Q, reach)
     hit = face >= 0
     fside = np.where(hit, surf.side[np.maximum(face, 0)], -1)
@@ -285,6 +294,12 @@ def _fit(surf: _Surface, p, n0, up, text, height, depth, taken=()):
         if steep > 0:
             parts.append(f"{steep:.0f} % of it lies where the face tilts more than {MAX_TILT_DEG:.0f} degrees")
         raise _NoFit(f"the text's box ({size}) does not fit: " + "; ".join(parts))
+    # heights along n0 must run on without a jump (else a fold or an overhang hides the face)
+    H = ((X - p) @ n0).reshape(len(xs), len(ys))
+    jump = max(np.abs(np.diff(H, axis=0)).max(initial=0.0), np.abs(np.diff(H, axis=1)).max(initial=0.0))
+    if jump > step * np.tan(np.radians(MAX_TILT_DEG)) * 1.5 + 0.05:
+        raise _NoFit(f"the text's box ({size}) does not fit: the face under it is partly hidden by a fold "
+                     f"or an overhang (a step of {jump:.1f} mm)")
     if len(taken) and np.min(cKDTree(np.concatenate(taken)).query(X)[0]) < step:
         raise _NoFit(f"the text's box ({size}) would overlap text placed before")
     # the wall under the letters (the box without the margin), on a coarser grid
@@ -297,7 +312,7 @@ def _fit(surf: _Surface, p, n0, up, text, height, depth, taken=()):
         i = int(np.argmin(wall))
         raise _NoFit(f"the wall under the text is only {wall[i]:.2f} mm thick at ({_xyz(X[pick][i])}) mm "
                      f"(at least {WALL_FACTOR:g} x the depth = {WALL_FACTOR * depth:.2f} mm is needed)")
-    return _Spot(p=p, r=r, u=up, n=n0, height=height, centre=centre, footprint=X)
+    return _Spot(p=p, r=r, u=up, n=n0, height=height, centre=centre, footprint=X, reach=reach)
 
 
 def _xyz(v) -> str:
@@ -307,18 +322,12 @@ def _xyz(v) -> str:
 def _candidates(surf: _Surface, order_key, spread):
     """Up to MAX_TRIES spots (indices into surf.spots), best (smallest key) first, at least
     ``spread`` mm apart."""
-    if len(surf.spots) == 0:
-        return []
-    order = np.argsort(order_key, kind="stable")
+    alive = np.isfinite(order_key)
     chosen = []
-    for i in order:
-        if not np.isfinite(order_key[i]):
-            break
-        x = surf.spots[i]
-        if all(np.linalg.norm(x - surf.spots[j]) >= spread for j in chosen):
-            chosen.append(i)
-            if len(chosen) >= MAX_TRIES:
-                break
+    while alive.any() and len(chosen) < MAX_TRIES:
+        i = int(np.argmin(np.where(alive, order_key, np.inf)))
+        chosen.append(i)
+        alive &= np.linalg.norm(surf.spots - surf.spots[i], axis=1) >= spread
     return chosen
 
 
@@ -359,7 +368,8 @@ def _place(surf, text, height, depth, key, clearance, up_of, taken, what):
     margin = max(MARGIN_MM, MARGIN_REL * height)
     need = 0.5 * (hi[1] - lo[1]) * height + margin  # half the height of the box: less cannot fit
     key = np.where(clearance >= need, key, np.inf)
-    cand = _candidates(surf, key, spread=max(height, 2.0))
+    # spots at least half the text's width apart: a long label tries the whole face, not one hump
+    cand = _candidates(surf, key, spread=max(2.0, height, 0.5 * (hi[0] - lo[0]) * height))
     if not cand:
         best = float(clearance.max(initial=0.0))
         raise _NoFit(f"{what}: no spot on the outer face is {need:.1f} mm from the rim / cut faces "
@@ -393,7 +403,7 @@ def _bent_prism(surf: _Surface, spot: _Spot, text: TextOutline, depth: float):
     mesh = prism.to_mesh64()
     P = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3]
     Q = spot.p + P[:, :1] * spot.r + P[:, 1:2] * spot.u
-    face, X, bary = surf.project(spot.p, spot.n, Q, reach=float(np.abs(P[:, :2]).max()) + 10.0)
+    face, X, bary = surf.project(spot.p, spot.n, Q, reach=spot.reach)  # as in _fit: the same faces
     ok = face >= 0
     ok[ok] = surf.side[face[ok]] == SIDE_OUTER
     if not ok.all():
