@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import BolusError
-from .topology import as_mesh_arrays, face_normals
+from .topology import as_mesh_arrays, face_normals, submesh
 
 __all__ = ["fibonacci_directions", "openness", "DEFAULT_DIRECTIONS"]
 
@@ -111,6 +111,8 @@ def openness(V, F, faces=None, *, directions: int = DEFAULT_DIRECTIONS, pixel_mm
     if len(F) == 0:
         raise BolusError("openness needs a surface with triangles")
     faces = np.arange(len(F)) if faces is None else np.asarray(faces, dtype=np.int64)
+    F, used = submesh(F, slice(None))  # only the vertices of the triangles: the buffer spans just them
+    V = V[used]
     if directions < 8:
         raise BolusError(f"openness needs at least 8 view directions, got {directions}")
     E = np.r_[F[:, [0, 1]], F[:, [1, 2]]]
