@@ -37,7 +37,7 @@ DEFAULT_DIRECTIONS = 96
 #: largest height buffer side (pixels): a coarser pixel is used on large surfaces
 MAX_PIXELS_SIDE = 1024
 #: largest default pixel (mm): a cavity a few pixels wide is resolved (a nostril is 8-10 mm across)
-MAX_PIXEL_MM = 1.0
+MAX_PIXEL_MM = 2.0
 
 
 def fibonacci_directions(k: int) -> np.ndarray:
@@ -100,8 +100,9 @@ def openness(V, F, faces=None, *, directions: int = DEFAULT_DIRECTIONS, pixel_mm
     V : (n,3) mm; F : (m,3) the whole surface that may hide a face (the occluders);
     faces : (k,) indices of the triangles to measure (default all); directions : number
     of view directions over the sphere; pixel_mm : height-buffer pixel (default the
-    median edge length, at most 1 mm, coarser only if the buffer would exceed 1024 pixels
-    a side; half of it gave the same cavities on the ICT face in twice the time);
+    median edge length of the faces measured, at most 2 mm, coarser only if the buffer
+    would exceed 1024 pixels a side; half of it gave the same cavities on the ICT face in
+    twice the time);
     progress : callable(fraction, text) or None.
 
     front is measured on the side of the triangle's normal (right-hand winding), back on
@@ -115,8 +116,9 @@ def openness(V, F, faces=None, *, directions: int = DEFAULT_DIRECTIONS, pixel_mm
     V = V[used]
     if directions < 8:
         raise BolusError(f"openness needs at least 8 view directions, got {directions}")
-    E = np.r_[F[:, [0, 1]], F[:, [1, 2]]]
-    edge = float(np.median(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)))
+    Fq = F[faces] if len(faces) else F
+    E = np.r_[Fq[:, [0, 1]], Fq[:, [1, 2]]]
+    edge = float(np.median(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)))  # of the faces measured
     span = float((V.max(axis=0) - V.min(axis=0)).max())
     pixel = float(pixel_mm) if pixel_mm else max(min(edge, MAX_PIXEL_MM), span * np.sqrt(3.0) / MAX_PIXELS_SIDE, 1e-9)
     C = V[F[faces]].mean(axis=1)
