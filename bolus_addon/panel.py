@@ -8,6 +8,9 @@ from .cut_ops import PROP_CUT_TABLE
 from .operators import PROP_FLV, PROP_PATCH_TABLE, PROP_SUM_VARPI
 from .pattern_ops import PATTERN_SUFFIX, PROP_PATTERN_TABLE
 from .print_ops import PROP_ORIENT_TABLE, PROP_PART_SOURCE, PROP_PRINT_TABLE
+from .shell_ops import (BOLUS_SUFFIX, PROP_MASS, PROP_THICKNESS_MAX, PROP_THICKNESS_MEAN, PROP_THICKNESS_MIN,
+                        PROP_VOLUME, is_bolus_object)
+from .solid_print_ops import PROP_CONNECTORS
 
 
 def draw_table(layout, heads, rows, alert=()) -> None:
@@ -103,15 +106,53 @@ def draw_pattern(box, s, obj):
     op = box.operator("bolus.export_pattern", icon="EXPORT")
     op.seam_allowance_mm = s.seam_allowance_mm
 
+def bolus_of(obj):
+    """The bolus solid to show figures of: obj itself, its ``<name>_bolus``, or the bolus a part came from."""
+    if obj is None:
+        return None
+    if is_bolus_object(obj):
+        return obj
+    src = bpy.data.objects.get(obj.get(PROP_PART_SOURCE, ""))
+    if is_bolus_object(src):
+        return src
+    return bpy.data.objects.get(obj.name + BOLUS_SUFFIX)
+
+
+def draw_bolus(box, s, obj):
+    box.label(text="4. Printed bolus", icon="MOD_SOLIDIFY")
+    col = box.column(align=True)
+    col.prop(s, "thickness_mm", text="Thickness (mm)")
+    col.prop(s, "clearance_mm", text="Clearance (mm)")
+    col.prop(s, "resolution_mm", text="Resolution (mm)")
+    box.prop(s, "label")
+    row = box.row(align=True)
+    row.prop(s, "left_axis", text="Left")
+    row.prop(s, "density_g_cm3", text="g/cm³")
+    op = box.operator("bolus.make_shell", icon="MOD_SOLIDIFY")
+    op.thickness_mm, op.clearance_mm, op.resolution_mm, op.label = (s.thickness_mm, s.clearance_mm,
+                                                                     s.resolution_mm, s.label)
+    b = bolus_of(obj)
+    if b is not None and PROP_VOLUME in b:
+        box.label(text=f"{b.name}: {b[PROP_VOLUME]:.1f} cm³, {b.get(PROP_MASS, 0.0):.0f} g")
+        box.label(text=f"Wall {b.get(PROP_THICKNESS_MIN, 0.0):.2f} / {b.get(PROP_THICKNESS_MEAN, 0.0):.2f} / "
+                       f"{b.get(PROP_THICKNESS_MAX, 0.0):.2f} mm (min / mean / max)")
+        joints = mesh_io.json_prop(b, PROP_CONNECTORS)
+        if joints is not None:
+            plain = sum(1 for j in joints if not j["connectors"])
+            box.label(text=f"{len(joints)} joints, {sum(len(j['connectors']) for j in joints)} connectors"
+                           + (f", {plain} plain" if plain else ""))
+    box.prop(s, "connector_clearance_mm", text="Connector clearance (mm)")
+
+
 def draw_print(box, s, obj):
-    box.label(text="4. 3D print", icon="MOD_BUILD")
+    box.label(text="5. 3D print", icon="MOD_BUILD")
     row = box.row(align=True)
     row.prop(s, "parts")
     row.prop(s, "print_method", text="")
     op = box.operator("bolus.print_segment", icon="MOD_EXPLODE")
     op.parts, op.method, op.seed = s.parts, s.print_method, s.seed
     src = obj
-    if obj is not None and PROP_PART_SOURCE in obj:
+    if obj is not None and PROP_PART_SOURCE in obj and not is_bolus_object(obj):  # a bolus names its skin
         src = bpy.data.objects.get(obj[PROP_PART_SOURCE], obj)
     t = mesh_io.json_prop(src, PROP_PRINT_TABLE)
     if t and "parts" in t:
@@ -146,6 +187,7 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
         draw_saliency(layout.box(), s, obj)
         draw_patches(layout.box(), s, obj)
         draw_pattern(layout.box(), s, obj)
+        draw_bolus(layout.box(), s, obj)
         draw_print(layout.box(), s, obj)
 
 

@@ -76,6 +76,10 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
     seed: seed_property()
 
     def run(self, context):
+        from . import solid_print_ops  # noqa: PLC0415 (it imports this module)
+
+        if solid_print_ops.is_bolus_object(context.active_object):  # a solid from make_shell: cut into solid parts
+            return solid_print_ops.print_segment_solid(self, context)
         region, topo, warnings = self.read_region(context, allow_nonmanifold=True)
         seg = print_segmentation(
             region.V, region.F, self.parts, method=self.method.lower(), rng=self.seed, topo=topo,
@@ -122,15 +126,21 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
         tri_labels = poly_labels[region.tri_poly]
         if not (tri_labels >= 0).any():
             raise BolusError("none of the region's faces belongs to a print part: run Split into Print Parts first")
-        plan = orient_print_parts(region.V, region.F, tri_labels, h=self.layer_mm, skin_side_up=self.skin_side_up,
-                                  topo=topo, progress=lambda f, t: self.progress(0.9 * f, t))
+        from . import solid_print_ops  # noqa: PLC0415 (it imports this module)
+
+        plan = orient_print_parts(region.V, region.F, tri_labels, h=self.layer_mm, topo=topo,
+                                  progress=lambda f, t: self.progress(0.9 * f, t),
+                                  **solid_print_ops.orient_options(region, tri_labels, self.skin_side_up))
+        closed_info, closed_warn = solid_print_ops.closed_lines(region, tri_labels)  # solids only
         self.progress(0.9, "part objects")
         self._make_part_objects(context, region, tri_labels, plan)
         table = plan.table(layer_mm=self.layer_mm, critical_angle_deg=CRITICAL_ANGLE_DEG,
                            skin_side_up=self.skin_side_up)
         obj[PROP_ORIENT_TABLE] = json.dumps(table)
         note = open_surface_note(topo)
-        self.warn_all(warnings + plan.warnings)
+        self.warn_all(warnings + plan.warnings + closed_warn)
+        for line in closed_info:
+            self.report({"INFO"}, line)
         self.report({"INFO"}, f"Oriented {len(plan.parts)} print parts of '{obj.name}' (layer {self.layer_mm:g} mm)"
                     + (f"; {note}" if note else ""))
         for r in table["rows"]:
@@ -208,8 +218,11 @@ class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def run(self, context):
+        from . import solid_print_ops  # noqa: PLC0415 (it imports this module)
+
         obj = mesh_io.active_mesh_object(context)
-        source = obj.get(PROP_PART_SOURCE, obj.name)
+        # a bolus's own 'bolus_source' names the skin it was made on: its parts are its own
+        source = obj.name if solid_print_ops.is_bolus_object(obj) else obj.get(PROP_PART_SOURCE, obj.name)
         parts = part_objects(source)
         if not parts:
             raise BolusError(f"'{source}' has no print parts yet: run Orient Print Parts first")
@@ -223,17 +236,19 @@ class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
         was_mode = obj.mode  # the user's mode comes back afterwards
         if obj.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
-        written = []
+        written, notes = [], []
         try:
             for k, part in enumerate(parts):
                 self.progress(k / len(parts))
-                path = os.path.join(folder, part.name + ".stl")
+                path = os.path.join(folder, solid_print_ops.stl_file_name(part))
                 for o in context.view_layer.objects:
                     o.select_set(o is part)
                 context.view_layer.objects.active = part
                 with _at_origin(context, part):
                     _stl_export(path, scale)
                 written.append(path)
+                if solid_print_ops.is_solid_part(part):  # SPEC: closed when the part is a solid
+                    notes.append(solid_print_ops.export_note(context, part, os.path.basename(path)))
         finally:
             for o in context.view_layer.objects:
                 o.select_set(o in was_selected)
@@ -242,6 +257,8 @@ class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
                 bpy.ops.object.mode_set(mode=was_mode)
         self.report({"INFO"}, f"Wrote {len(written)} STL files (binary, mm, each at the origin on z = 0) to {folder}: "
                     + ", ".join(os.path.basename(p) for p in written))
+        for level, msg in notes:
+            self.report({level}, msg)
         return {"FINISHED"}
 
 

@@ -98,12 +98,12 @@ def label_outlines(label: str, part_count: int | None = None) -> dict:
 
 
 def engrave(context, V, F, side, label: str, part_labels=None):
-    """`core.engrave.engrave_labels` with outlines from Blender's font -> (V, F, side, warnings)."""
+    """`core.engrave.engrave_labels` with outlines from Blender's font -> (V, F, side, part labels, warnings)."""
     from .core.engrave import engrave_labels  # noqa: PLC0415
 
     parts = None if part_labels is None else int(np.max(part_labels)) + 1
     return engrave_labels(V, F, side, label_outlines(label, parts), label, left_vector(context),
-                          part_labels=part_labels)
+                          part_labels=part_labels, return_labels=True)
 
 
 def remove_mesh(me) -> None:
@@ -164,7 +164,7 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
         label = self.label.strip()
         if label:
             self.progress(0.87, "engraving the label")
-            V, F, side, notes = engrave(context, V, F, side, label)
+            V, F, side, _, notes = engrave(context, V, F, side, label)
             warnings += list(notes)
         self.progress(0.95, "writing the bolus")
         density = float(getattr(getattr(context.scene, "bolus", None), "density_g_cm3", DEFAULT_DENSITY))

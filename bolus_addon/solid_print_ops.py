@@ -21,8 +21,6 @@ import re
 
 import bpy
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from . import mesh_io
 from .core.colormap import categorical_linear_rgba
@@ -64,27 +62,6 @@ def stored_solid(obj, mm: float):
     if side is None:
         raise BolusError(f"the stored solid '{meshes[1].name}' has no '{ATTR_SHELL_SIDE}': run Make Bolus again")
     return skin_V, skin_F, V, F, side
-
-
-def labels_after(V0, F0, labels0, V1, F1) -> np.ndarray:
-    """(m1,) part of every face of (V1, F1), a remake of the parts (V0, F0, labels0) whose faces
-    changed (engraving): each connected piece of the new mesh takes the part most of its vertices
-    are nearest to among the old part's vertices (parts are separate pieces)."""
-    from scipy.spatial import cKDTree  # noqa: PLC0415
-
-    F1 = np.asarray(F1, dtype=np.int64)
-    n = len(V1)
-    rows = np.repeat(np.arange(len(F1)), 3)
-    A = sp.coo_matrix((np.ones(3 * len(F1)), (rows, F1.ravel())), shape=(len(F1), n)).tocsr()
-    _, comp = connected_components(A.T @ A, directed=False)  # vertices joined through faces
-    vlab0 = np.full(len(V0), -1, dtype=np.int64)
-    vlab0[np.asarray(F0).ravel()] = np.repeat(np.asarray(labels0, dtype=np.int64), 3)
-    used = vlab0 >= 0
-    _, nearest = cKDTree(np.asarray(V0)[used]).query(np.asarray(V1))
-    vote = vlab0[used][nearest]
-    k = int(vote.max()) + 1
-    counts = sp.coo_matrix((np.ones(n), (comp, vote)), shape=(comp.max() + 1, k)).toarray()
-    return counts.argmax(axis=1)[comp[F1[:, 0]]]
 
 
 def connectors_json(parts) -> str:
@@ -136,9 +113,8 @@ def print_segment_solid(op, context) -> set[str]:
     label = str(obj.get(PROP_LABEL, ""))
     if label:
         op.progress(0.85, "engraving the labels")
-        EV, EF, eside, notes = engrave(context, PV, PF, pside, label, part_labels=plabels)
-        plabels = plabels if len(EF) == len(PF) and np.array_equal(EF, PF) else labels_after(PV, PF, plabels, EV, EF)
-        PV, PF, pside = EV, EF, np.asarray(eside)
+        PV, PF, pside, plabels, notes = engrave(context, PV, PF, pside, label, part_labels=plabels)
+        pside, plabels = np.asarray(pside), np.asarray(plabels)
         warnings += list(notes)
     k = int(plabels.max()) + 1
     closed = [closed_report(*_part_arrays(PV, PF, plabels == p)) for p in range(k)]
