@@ -161,6 +161,15 @@ def test_a_closed_surface_wound_inside_out_is_measured_on_its_open_side():
     assert any("normals point into the body" in w for w in a.warnings)
 
 
+def test_warnings_at_the_mesh_border_and_for_a_small_mesh():
+    V, F = plane(20, 60.0, 0.0)
+    a = treatment_area(V, F, [25.0, 0.0, 0.0], 20.0, exclude_cavities=False)
+    assert any("reaches the border of the mesh" in w for w in a.warnings)
+    b = treatment_area(V, F, [0.0, 0.0, 0.0], 100.0, exclude_cavities=False)
+    assert b.selected.all() and not b.split.any() and b.area_mm2 == pytest.approx(3600.0)
+    assert any("whole connected surface lies within 100 mm" in w for w in b.warnings)
+
+
 # ---------------------------------------------------------------- bad input
 @pytest.mark.parametrize("radius", [0.0, -5.0, np.nan, np.inf])
 def test_bad_radius(radius):
@@ -204,3 +213,21 @@ def test_degenerate_meshes():
             else:
                 with pytest.raises(BolusError, match=must):
                     geodesic_distance(V2, F2, centre, 0)
+            if name in ("nan", "inf", "coincident", "collinear"):
+                with pytest.raises(BolusError, match=must):
+                    cavity_faces(V2, F2)
+            if name in ("nan", "inf"):
+                with pytest.raises(BolusError, match=must):
+                    openness(V2, F2)
+                with pytest.raises(BolusError, match=must):
+                    closest_point_on_mesh(V2, F2, centre)
+
+
+def test_openness_of_zero_area_and_needle_triangles_is_sound():
+    V, F = plane(12, 60.0, 0.0)
+    for name in ("coincident", "collinear", "needle"):
+        V2, F2, _ = meshgen.degenerate_variants(V, F)[name]
+        front, back = openness(V2, F2)
+        assert np.isfinite(front).all() and np.isfinite(back).all()
+        assert front[len(F):].tolist() == [1.0] * (len(F2) - len(F)) or name == "needle"
+        assert front[: len(F)].min() > 0.9  # the plane around them stays open

@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import BolusError
-from .topology import MeshTopology, check_mesh
+from .topology import as_mesh_arrays, check_mesh
 
 __all__ = ["geodesic_distance", "barycentric", "closest_point_on_mesh"]
 
@@ -79,7 +79,10 @@ def closest_point_on_mesh(V: np.ndarray, F: np.ndarray, p) -> tuple[np.ndarray, 
 
     Exact point-triangle distance on every triangle (vectorised; about 20 ms per 100k
     triangles)."""
+    V, F = as_mesh_arrays(V, F)
     p = np.asarray(p, dtype=np.float64).reshape(3)
+    if len(F) == 0:
+        raise BolusError("the surface has no triangles")
     Q = _closest_on_triangles(p, V[F])
     d2 = ((Q - p) ** 2).sum(1)
     f = int(np.argmin(d2))

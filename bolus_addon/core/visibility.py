@@ -78,12 +78,12 @@ def _height_buffer(P2: np.ndarray, H: np.ndarray, F: np.ndarray, origin: np.ndar
         a, b, c = T[tri, 0], T[tri, 1], T[tri, 2]
         v0, v1, v2 = b - a, c - a, q - a
         den = v0[:, 0] * v1[:, 1] - v0[:, 1] * v1[:, 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):  # a triangle seen edge-on (den = 0) covers nothing
             s = (v2[:, 0] * v1[:, 1] - v2[:, 1] * v1[:, 0]) / den
             t = (v0[:, 0] * v2[:, 1] - v0[:, 1] * v2[:, 0]) / den
-        inside = (s >= -1e-9) & (t >= -1e-9) & (s + t <= 1 + 1e-9) & (den != 0)
-        Ht = H[F[tri]]
-        h = Ht[:, 0] + s * (Ht[:, 1] - Ht[:, 0]) + t * (Ht[:, 2] - Ht[:, 0])
+            inside = (s >= -1e-9) & (t >= -1e-9) & (s + t <= 1 + 1e-9) & (den != 0)
+            Ht = H[F[tri]]
+            h = Ht[:, 0] + s * (Ht[:, 1] - Ht[:, 0]) + t * (Ht[:, 2] - Ht[:, 0])
         np.maximum.at(zbuf, (ix * ny + iy)[inside], h[inside])
     iv = np.floor((P2 - origin) / pixel).astype(np.int64)
     okv = (iv[:, 0] >= 0) & (iv[:, 0] < nx) & (iv[:, 1] >= 0) & (iv[:, 1] < ny)
