@@ -140,7 +140,9 @@ def _propagate(V: np.ndarray, F: np.ndarray, d: np.ndarray, max_mm: float = np.i
     touch = sp.csr_matrix((np.ones(2 * len(I)), (np.r_[J, Lv], np.r_[np.arange(len(I)), np.arange(len(I))])),
                           shape=(n, len(I)))
     active = np.nonzero(np.isfinite(d[J]) | np.isfinite(d[Lv]))[0]
-    while len(active):
+    for _ in range(4 * n + 100):  # a pass moves the front by at least one ring: never reached
+        if not len(active):
+            break
         i, j, l = I[active], J[active], Lv[active]
         dj, dl = d[j], d[l]
         cand = np.minimum(dj + lij[active], dl + lil[active])

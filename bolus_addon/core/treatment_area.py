@@ -156,9 +156,9 @@ def _vertex_openness(V, F, faces, o_face) -> np.ndarray:
     return to_vertices(ov[F[faces]].mean(axis=1))
 
 
-def treatment_area(V, F, centre, radius_mm: float = 45.0, exclude_cavities: bool = True, *,
+def treatment_area(V, F, centre, radius_mm: float = 45.0, exclude_cavities: bool = True, progress=None, *,
                    openness_threshold: float = OPENNESS_THRESHOLD, directions: int = DEFAULT_DIRECTIONS,
-                   max_cursor_mm: float | None = None, progress=None) -> Area:
+                   max_cursor_mm: float | None = None) -> Area:
     """The area within ``radius_mm`` along the surface of the surface point nearest ``centre``.
 
     Parameters
