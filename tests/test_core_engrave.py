@@ -225,9 +225,11 @@ def test_labels_and_markers_on_parts():
     side = np.r_[sa, sb]
     parts = np.r_[np.zeros(len(Fa), int), np.ones(len(Fb), int)]
     outlines = {"P 0": LO, "P 1": text(GLYPH_O, GLYPH_O), "L": TextOutline(GLYPH_L, 0.7), "R": text(GLYPH_O)}
+    seen = []
     V2, F2, s2, lab2, warnings = engrave_labels(V, F, side, outlines, "P", (1.0, 0.0, 0.0), part_labels=parts,
-                                                return_labels=True)
+                                                return_labels=True, progress=lambda f, t: seen.append(f))
     assert warnings == []
+    assert seen == sorted(seen) and seen[0] == 0.0 and seen[-1] == 1.0
     h = LABEL_HEIGHTS[0]
     for i, area in ((0, AREA_LO + AREA_O), (1, 2 * AREA_O + AREA_L)):  # part 0: "P 0" + "R"; part 1: "P 1" + "L"
         Fi = F2[lab2 == i]

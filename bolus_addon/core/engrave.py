@@ -513,7 +513,7 @@ def engrave_text(V, F, side, text: TextOutline, *, height_mm=6.0, depth_mm=0.6, 
 
 
 def engrave_labels(V, F, side, outlines: dict, label: str, left, *, part_labels=None, depth_mm=0.6,
-                   up=None, return_labels=False):
+                   up=None, return_labels=False, progress=None):
     """The bolus's own marks: ``label`` (``"<label> <i>"`` on each part i when ``part_labels`` (m,)
     is given, on the part's own outer face) and "L" / "R" at the patient's left / right ends
     (``left`` (3,): unit vector to the patient's left; only on the parts that hold those ends),
@@ -523,7 +523,7 @@ def engrave_labels(V, F, side, outlines: dict, label: str, left, *, part_labels=
     outlines: {string: TextOutline} for every string of `strings_needed`.  Nothing when the label
     is empty.  Returns (V', F', side', warnings) -- with ``return_labels`` (V', F', side',
     part_labels', warnings), the part of each new face -- warnings naming what was not placed
-    and why (those parts are left as they were)."""
+    and why (those parts are left as they were).  progress(fraction, text): once per part."""
     V, F, side = _check_solid(V, F, side)
     label = (label or "").strip()
     parts = np.zeros(len(F), dtype=np.int64) if part_labels is None else np.asarray(part_labels, dtype=np.int64)
@@ -546,7 +546,9 @@ def engrave_labels(V, F, side, outlines: dict, label: str, left, *, part_labels=
             surfs[i] = _Surface(V[vid], Fl, side[parts == i], what=f"part {i}" if part_labels is not None else "the solid")
     ends = _marker_parts(surfs, left)
     warnings, pieces = [], []
+    progress = progress or (lambda f, t: None)
     for i in range(k):
+        progress(i / max(k, 1), f"engraving part {i + 1} of {k}" if part_labels is not None else "engraving")
         surf = surfs.get(i)
         if surf is None:
             continue
@@ -555,6 +557,7 @@ def engrave_labels(V, F, side, outlines: dict, label: str, left, *, part_labels=
         Vi, Fi, si, notes = _engrave_part(surf, outlines, items, left, up, float(depth_mm))
         warnings += [n if part_labels is None else f"part {i}: {n}" for n in notes]
         pieces.append((Vi, Fi, si, i))
+    progress(1.0, "engraving done")
     offs = np.cumsum([0] + [len(p[0]) for p in pieces])
     V2 = np.concatenate([p[0] for p in pieces]) if pieces else V
     F2 = np.concatenate([p[1] + o for p, o in zip(pieces, offs)]) if pieces else F
