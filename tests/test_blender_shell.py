@@ -334,3 +334,32 @@ def test_existing_object_of_that_name_is_kept(bpy_addon, scene):
     with pytest.raises(RuntimeError, match="'dome_bolus' exists and is not a bolus"):
         bpy.ops.bolus.make_shell(thickness_mm=T_CAP, resolution_mm=RES_CAP)
     assert datablock_names(bpy) == names and bpy.data.objects["dome_bolus"] == mine
+
+
+@pytest.mark.parametrize("existing", [False, True], ids=["new", "replacing"])
+def test_failure_after_the_core_leaves_nothing(bpy_addon, scene, monkeypatch, existing):
+    """Writing the bolus fails half-way (the second attribute write): the meshes made so far are
+    removed, an existing bolus stays as it was, the source is unchanged."""
+    bpy = bpy_addon
+    ob = hemisphere(bpy, R=10.0, rings=8, na=24)
+    if existing:
+        assert bpy.ops.bolus.make_shell(thickness_mm=T_CAP, resolution_mm=RES_CAP) == {"FINISHED"}
+        old = object_snapshot(bpy.data.objects["dome_bolus"])
+    before, names = object_snapshot(ob), datablock_names(bpy)
+    mesh_io = __import__("sys").modules["bolus.bolus_addon.mesh_io"]
+    real, calls = mesh_io.write_attribute, []
+
+    def failing(*a, **k):
+        calls.append(a[1])
+        if len(calls) == 2:
+            raise TypeError("foreach_set(..) sequence length mismatch")
+        return real(*a, **k)
+
+    monkeypatch.setattr(mesh_io, "write_attribute", failing)
+    with pytest.raises(RuntimeError, match=r"Unexpected error, nothing was changed \(TypeError: foreach_set"):
+        bpy.ops.bolus.make_shell(thickness_mm=T_CAP + 1.0, resolution_mm=RES_CAP)
+    assert calls == ["bolus_shell_side", "bolus_shell_side"]  # the test reached the write
+    assert datablock_names(bpy) == names, "meshes were left behind"
+    assert_same_object(before, object_snapshot(ob))
+    if existing:
+        assert_same_object(old, object_snapshot(bpy.data.objects["dome_bolus"]))
