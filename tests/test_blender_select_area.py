@@ -180,6 +180,27 @@ def test_uv_and_attributes_interpolated_on_new_corners(bpy_addon, scene):
     assert "bolus_area_tmp" not in me.attributes
 
 
+def test_object_transform_and_units(bpy_addon, scene):
+    """The radius is in world millimetres: an object scaled by 2, rotated and moved, in a scene of 1 unit = 1 cm."""
+    bpy = bpy_addon
+    n = 30
+    xs = np.linspace(0.0, 6.0, n + 1)  # 6 units = 12 cm across after the scale
+    X, Y = np.meshgrid(xs, xs, indexing="ij")
+    V = np.c_[X.ravel(), Y.ravel(), np.zeros(X.size)]
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    F = np.stack([idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()], axis=1)
+    ob = make_object(bpy, V, F, scale_length=0.01)
+    ob.scale = (2.0, 2.0, 2.0)
+    ob.rotation_euler = (0.4, 0.0, 0.7)
+    ob.location = (1.0, -2.0, 3.0)
+    bpy.context.view_layer.update()
+    centre = np.array(ob.matrix_world) @ np.r_[3.0, 3.0, 0.0, 1.0]
+    bpy.context.scene.cursor.location = tuple(centre[:3])
+    assert bpy.ops.bolus.select_area(radius_mm=40.0) == {"FINISHED"}
+    Vw, Fw, tp, sel = selection(bpy, ob)
+    assert area_of(Vw, Fw[sel[tp]]) == pytest.approx(np.pi * 40.0 ** 2, rel=0.01)
+
+
 # ----------------------------------------------------------------------- refusals
 def test_refusals_change_nothing(bpy_addon, ict):
     bpy = bpy_addon
