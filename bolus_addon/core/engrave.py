@@ -172,6 +172,7 @@ class _Surface:
         spots, face, bary = _sample_faces(V, F, outer, SPOT_SPACING_MM)
         keep = _thin_out(spots, SPOT_SPACING_MM)
         self.spots, self.spot_face, self.spot_bary = spots[keep], face[keep], bary[keep]
+        self.spot_tree = cKDTree(self.spots)
         bounds = _sample_faces(V, F, np.nonzero(np.isin(side, _BOUNDING_SIDES))[0], SPOT_SPACING_MM)[0]
         self.bounds = bounds[_thin_out(bounds, SPOT_SPACING_MM)]
         self.M, self.sid = _tracked_manifold(V, F, what)
@@ -290,9 +291,9 @@ def _fit(surf: _Surface, p, n0, up, text, height, depth, taken=()):
         if off > 0:
             named = sorted({SIDE_NAMES.get(int(s), str(s)) for s in np.unique(fside[hit & (fside != SIDE_OUTER)])})
             where = " or ".join(["beyond the solid"] * bool(np.any(~hit)) + [f"over {s} faces" for s in named])
-            parts.append(f"{off:.0f} % of it lies off the outer face ({where})")
+            parts.append(f"{_percent(off)} of it lies off the outer face ({where})")
         if steep > 0:
-            parts.append(f"{steep:.0f} % of it lies where the face tilts more than {MAX_TILT_DEG:.0f} degrees")
+            parts.append(f"{_percent(steep)} of it lies where the face tilts more than {MAX_TILT_DEG:.0f} degrees")
         raise _NoFit(f"the text's box ({size}) does not fit: " + "; ".join(parts))
     # heights along n0 must run on without a jump (else a fold or an overhang hides the face)
     H = ((X - p) @ n0).reshape(len(xs), len(ys))
@@ -313,6 +314,10 @@ def _fit(surf: _Surface, p, n0, up, text, height, depth, taken=()):
         raise _NoFit(f"the wall under the text is only {wall[i]:.2f} mm thick at ({_xyz(X[pick][i])}) mm "
                      f"(at least {WALL_FACTOR:g} x the depth = {WALL_FACTOR * depth:.2f} mm is needed)")
     return _Spot(p=p, r=r, u=up, n=n0, height=height, centre=centre, footprint=X, reach=reach)
+
+
+def _percent(x) -> str:
+    return f"{x:.0f} %" if x >= 1 else "under 1 %"
 
 
 def _xyz(v) -> str:
@@ -566,6 +571,35 @@ def engrave_labels(V, F, side, outlines: dict, label: str, left, *, part_labels=
     return (V2, F2, s2, l2, warnings) if return_labels else (V2, F2, s2, warnings)
 
 
+def _label_up(surf: _Surface, text, height, left, up, turn):
+    """up_of(p, n0) for `_place`: ``up`` projected, else n0 x left (reads left to right for a viewer
+    facing the face with the patient's left on his right), else `_default_up`; with ``turn`` the
+    text runs along the direction the outer face is longest in around p, still towards the left."""
+    lo, hi = _text_box(text)
+    radius = 0.5 * (hi[0] - lo[0]) * height + max(MARGIN_MM, MARGIN_REL * height)
+
+    def up_of(p, n0):
+        fallback = _default_up(surf, n0)
+        u = _projected(up if up is not None else np.cross(n0, left), n0, fallback)
+        if turn:
+            x = _projected(_local_long_axis(surf, p, n0, radius), n0, np.cross(u, n0))
+            x = x if x @ left >= 0 else -x
+            u = np.cross(n0, x)
+        return u
+    return up_of
+
+
+def _local_long_axis(surf: _Surface, p, n0, radius):
+    """(3,) the direction in which the outer face around p (within ``radius``) extends most
+    (principal axis of its spots in the tangent plane)."""
+    near = surf.spots[surf.spot_tree.query_ball_point(p, radius)]
+    if len(near) < 3:
+        return surf.axes[0]
+    D = near - near.mean(axis=0)
+    D = D - np.outer(D @ n0, n0)
+    return np.linalg.eigh(D.T @ D)[1][:, -1]
+
+
 def _marker_parts(surfs, left):
     """{"L": part holding the outer-face point farthest to the patient's left, "R": ... right}."""
     best = {}
@@ -591,18 +625,11 @@ def _engrave_part(surf: _Surface, outlines, items, left, up, depth):
             a = surf.spots @ left
             key0 = -a if kind == "L" else a
         spot, note = None, None
-        for turn in (False, True) if kind == "label" else (False,):
-            for height in LABEL_HEIGHTS:
-                def up_of(p, n0, turn=turn):
-                    fallback = _default_up(surf, n0)
-                    u = _projected(up, n0, fallback) if up is not None else _projected(np.cross(n0, left), n0, fallback)
-                    if turn:  # text along the part's longest extent, still reading towards the left
-                        x = _projected(surf.axes[0], n0, np.cross(u, n0))
-                        x = x if x @ left >= 0 else -x
-                        u = np.cross(n0, x)
-                    return u
+        for height in LABEL_HEIGHTS:
+            for turn in (False, True) if kind == "label" else (False,):
                 try:
-                    spot = _place(surf, text, height, depth, key0, clearance, up_of, taken, f"'{s}'")
+                    spot = _place(surf, text, height, depth, key0, clearance,
+                                  _label_up(surf, text, height, left, up, turn), taken, f"'{s}'")
                     prism, vol = _bent_prism(surf, spot, text, depth)
                     break
                 except _NoFit as e:
@@ -610,7 +637,9 @@ def _engrave_part(surf: _Surface, outlines, items, left, up, depth):
             if spot is not None:
                 break
         if spot is None:
-            notes.append(f"'{s}' not engraved: {note}")
+            also = "also tried " + " and ".join(f"{h:g}" for h in LABEL_HEIGHTS[1:]) + " mm letters"
+            also += " and the text turned along the face" if kind == "label" else ""
+            notes.append(f"'{s}' not engraved: {note} ({also})")
             continue
         taken.append(spot.footprint)
         prisms.append(prism)
