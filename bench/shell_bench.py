@@ -11,10 +11,8 @@ Regions (skin surfaces in mm, face normals pointing away from the body, i.e. the
 the bolus grows on):
 
 * ``example nose``: the demo's treatment area on ``assets/ict_face_narrow.obj`` (cm -> mm):
-  ``core.treatment_area.treatment_area(V, F, tip, 45 mm)`` when that module is there (the
-  core of ``bolus.select_area``), else the demo's own selection (``scripts/demo.py
-  select_treatment_area``: polygons whose centre lies within 45 mm of the nose tip and
-  whose normal faces forward, the piece connected to the tip);
+  ``core.treatment_area.treatment_area(V, F, nose tip, 45 mm)`` (the core of ``bolus.select_area``,
+  which the demo calls), nostril cavities left out (holes of the region);
 * ``nefertiti face``: ``nefertiti.obj`` (mm), the triangles with every corner within
   ``FACE_RADIUS_MM`` of the nose tip (the vertex of largest z), the edge-connected piece
   holding it, midpoint-subdivided until it has at least ``MIN_FACES`` triangles;
@@ -25,7 +23,9 @@ the bolus grows on):
 For every region, each call in a child process of its own (``--worker``: the figures
 of one call do not depend on what ran before, and the peak memory is the child's):
 
-* ours: ``make_shell(V, F, thickness=10, resolution=r)`` for r in ``RESOLUTIONS``;
+* ours: ``make_shell(V, F, thickness=10, resolution=r)`` for r in ``RESOLUTIONS`` (0.5 and 1.0 mm on the
+  example nose, 1.0 mm on the two face crops: make_shell takes minutes there at 1.0 mm, four to eight times
+  that at 0.5 mm; ``--resolution R`` (repeatable) runs R on every region);
 * the peer: Blender's Solidify modifier on a mesh object of the same region,
   ``solidify_mode='NON_MANIFOLD'`` (complex), ``thickness=10``, ``offset=+1`` (the new
   face on the side the normals point to), ``use_rim=True``, ``use_even_offset=True``,
@@ -63,6 +63,7 @@ Meshes come from ``<repo>/../shared/meshes`` (override with BOLUS_SHARED_MESHES)
 """
 from __future__ import annotations
 
+import argparse
 import gc
 import json
 import os
@@ -78,7 +79,7 @@ from benchutil import ROOT, SHARED_MESHES, Table
 from unfold_bench import midpoint_subdivide, region_around, submesh
 
 THICKNESS_MM = 10.0
-RESOLUTIONS = (0.5, 1.0)
+RESOLUTIONS = {"example nose": (0.5, 1.0), "nefertiti face": (1.0,), "demosthenes face": (1.0,)}
 RESOLUTIONS_QUICK = (1.0,)
 NOSE_RADIUS_MM = 45.0  # the demo's treatment area (scripts/demo.py --radius default)
 FACE_RADIUS_MM = 100.0
@@ -90,6 +91,7 @@ PARTS_CLEARANCE_MM = 0.2
 RAY_MAX = 3.0  # rays longer than RAY_MAX * thickness count as missing the outer face
 BORDER_STEP_MM = 0.25  # border edges are sampled this finely for the distance to the border
 WORKER_TIMEOUT_S = 600
+SPOTS = 3  # self-intersections: where the first few are (JSON)
 #: (key, nonmanifold_thickness_mode)
 SOLIDIFY_MODES = (("Solidify even", "EVEN"), ("Solidify constraints", "CONSTRAINTS"))
 REGIONS = ("example nose", "nefertiti face", "demosthenes face")
@@ -121,56 +123,20 @@ def outward(V, F, inside):
     return np.ascontiguousarray(F[:, ::-1]), True
 
 
-def demo_selection(V, F, tri_face, radius_mm: float = NOSE_RADIUS_MM):
-    """The demo's treatment area in arrays (scripts/demo.py select_treatment_area, OBJ axes: the face looks
-    towards +z): the OBJ polygons whose centre (mean of its vertices) lies within radius_mm of the nose tip (the
-    vertex of largest z) and whose normal has z > 0.1, the edge-connected piece holding the polygon nearest the
-    tip.  Returns the triangle mask (m,) bool."""
-    import numpy as np
-
-    from bolus_addon.core.topology import MeshTopology, face_areas, face_normals
-
-    tip = V[int(np.argmax(V[:, 2]))]
-    npoly = int(tri_face.max()) + 1
-    pv = np.unique(np.stack([np.repeat(tri_face, 3), F.ravel()], axis=1), axis=0)  # (polygon, vertex) pairs
-    centre = np.zeros((npoly, 3))
-    np.add.at(centre, pv[:, 0], V[pv[:, 1]])
-    centre /= np.bincount(pv[:, 0], minlength=npoly)[:, None]
-    normal = np.zeros((npoly, 3))
-    np.add.at(normal, tri_face, face_normals(V, F) * face_areas(V, F)[:, None])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    sel = (np.linalg.norm(centre - tip, axis=1) < radius_mm) & (normal[:, 2] > 0.1)
-    keep = sel[tri_face]
-    _, comp = MeshTopology(V, F[keep]).face_components()
-    tip_poly = np.nonzero(sel)[0][np.argmin(np.linalg.norm(centre[sel] - tip, axis=1))]
-    tip_comp = comp[np.nonzero(tri_face[keep] == tip_poly)[0][0]]
-    out = np.zeros(len(F), dtype=bool)
-    out[np.nonzero(keep)[0][comp == tip_comp]] = True
-    return out
-
-
 def example_region() -> dict:
-    """The example nose region (module doc): V, F (mm), the rest of the face (others), how it was made."""
+    """The example nose region (module doc): V, F (mm) and how it was made."""
     import numpy as np
 
     from bolus_addon.core.objfile import load_obj
+    from bolus_addon.core.treatment_area import treatment_area
 
-    V, F, tri_face = load_obj(ROOT / "assets" / "ict_face_narrow.obj", 10.0)
+    V, F, _ = load_obj(ROOT / "assets" / "ict_face_narrow.obj", 10.0)
     tip = V[int(np.argmax(V[:, 2]))]
-    try:
-        from bolus_addon.core.treatment_area import treatment_area
-    except ImportError:
-        treatment_area = None
-    if treatment_area is not None:
-        area = treatment_area(V, F, tip, NOSE_RADIUS_MM, exclude_cavities=True)
-        Vr, Fr = submesh(area.V, area.F, area.selected)
-        how = (f"ict_face_narrow.obj x10 (cm -> mm), treatment_area(tip, {NOSE_RADIUS_MM:g} mm, "
-               f"exclude_cavities=True) (bolus.select_area's core): {len(Fr)} triangles, {area.holes} holes")
-    else:
-        sel = demo_selection(V, F, tri_face)
-        Vr, Fr = submesh(V, F, sel)
-        how = (f"ict_face_narrow.obj x10 (cm -> mm), the demo's selection (core.treatment_area not there yet): "
-               f"polygons within {NOSE_RADIUS_MM:g} mm of the nose tip facing forward, connected: {len(Fr)} triangles")
+    area = treatment_area(V, F, tip, NOSE_RADIUS_MM, exclude_cavities=True)
+    Vr, Fr = submesh(area.V, area.F, area.selected)
+    how = (f"ict_face_narrow.obj x10 (cm -> mm), the demo's area: treatment_area(nose tip (largest z), "
+           f"{NOSE_RADIUS_MM:g} mm, exclude_cavities=True) (the core of bolus.select_area): {len(Fr)} triangles, "
+           f"{area.holes} holes")
     Fr, flipped = outward(Vr, Fr, V.mean(axis=0))
     return {"name": "example nose", "V": Vr, "F": Fr, "how": how + (", rewound outward" if flipped else "")}
 
@@ -269,31 +235,38 @@ def ray_thickness(skin_V, skin_F, outer_V, outer_F, thickness: float) -> dict:
     return out
 
 
-def self_intersections(V, F) -> int:
-    """Pairs of triangles of (V, F) that intersect (BVHTree.overlap of the mesh with itself), leaving out pairs
-    that share a vertex (neighbours touch by construction)."""
+def intersecting_pairs(V, F):
+    """(k,2) pairs i < j of triangles of (V, F) that intersect (BVHTree.overlap of the mesh with itself), leaving
+    out pairs that share a vertex (neighbours touch by construction)."""
     import numpy as np
     from mathutils.bvhtree import BVHTree
 
     tree = BVHTree.FromPolygons(np.asarray(V).tolist(), np.asarray(F).tolist(), all_triangles=True)
     pairs = np.array(tree.overlap(tree), dtype=np.int64).reshape(-1, 2)
     pairs = pairs[pairs[:, 0] < pairs[:, 1]]
-    if not len(pairs):
-        return 0
     a, b = F[pairs[:, 0]], F[pairs[:, 1]]
-    share = (a[:, :, None] == b[:, None, :]).any(axis=(1, 2))
-    return int((~share).sum())
+    return pairs[~(a[:, :, None] == b[:, None, :]).any(axis=(1, 2))]
 
 
-def folded_triangles(V, F, src, skin_V, skin_F) -> int:
-    """Offset-layer triangles (V, F) whose normal turned against their source skin face's (src (j,) index into
-    skin_F): n . n_source <= 0 (a collapsed triangle counts as folded)."""
+def self_intersections(V, F) -> int:
+    """The number of `intersecting_pairs` of (V, F)."""
+    return int(len(intersecting_pairs(V, F)))
+
+
+def folded_mask(V, F, src, skin_V, skin_F):
+    """(j,) bool: offset-layer triangles (V, F) whose normal turned against their source skin face's (src (j,)
+    index into skin_F): n . n_source <= 0 (a collapsed triangle counts as folded)."""
     import numpy as np
 
     from bolus_addon.core.topology import face_normals
 
     n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    return int((np.einsum("ij,ij->i", n, face_normals(skin_V, skin_F)[src]) <= 0).sum())
+    return np.einsum("ij,ij->i", n, face_normals(skin_V, skin_F)[src]) <= 0
+
+
+def folded_triangles(V, F, src, skin_V, skin_F) -> int:
+    """The number of folded offset-layer triangles (`folded_mask`)."""
+    return int(folded_mask(V, F, src, skin_V, skin_F).sum())
 
 
 def measure_solid(V, F, outer, skin_V, skin_F, thickness: float) -> dict:
@@ -303,8 +276,10 @@ def measure_solid(V, F, outer, skin_V, skin_F, thickness: float) -> dict:
     rep = closed_report(V, F)
     t = ray_thickness(skin_V, skin_F, V, F[outer], thickness)
     t.pop("distances")
-    return {"triangles": int(len(F)), "closed": rep, "thickness": t,
-            "self_intersections": self_intersections(V, F)}
+    pairs = intersecting_pairs(V, F)
+    spots = V[F[pairs[:SPOTS, 0]]].mean(axis=1)
+    return {"triangles": int(len(F)), "closed": rep, "thickness": t, "self_intersections": int(len(pairs)),
+            "self_intersection_spots": [[round(float(x), 1) for x in p] for p in spots]}
 
 
 # ----------------------------------------------------------------------------- Solidify
@@ -389,15 +364,21 @@ def _status_kb(key: str) -> int:
 
 
 def measured(fn):
-    """(fn(), stats): wall time of the call and its peak memory (VmHWM reset before it, minus VmRSS before)."""
+    """(fn(), stats): wall time of the call, the CPU time of all its threads (the machine is shared: CPU time
+    depends less on what else runs) and its peak memory (VmHWM reset before it, minus VmRSS before)."""
+    import resource
+
     gc.collect()
     rss0 = _status_kb("VmRSS")
     reset = benchutil.reset_peak_rss()
+    r0 = resource.getrusage(resource.RUSAGE_SELF)
     t0 = time.perf_counter()
     res = fn()
     dt = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_SELF)
     hwm = _status_kb("VmHWM")
-    return res, {"seconds": dt, "rss_before_mb": rss0 / 1024.0, "peak_mb": hwm / 1024.0,
+    return res, {"seconds": dt, "cpu_seconds": (r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime),
+                 "rss_before_mb": rss0 / 1024.0, "peak_mb": hwm / 1024.0,
                  "peak_delta_mb": (hwm - rss0) / 1024.0 if reset else None}
 
 
@@ -498,7 +479,8 @@ def have(module: str, name: str) -> bool:
         return False
 
 
-def bench_region(region: dict, args, tmp: Path) -> dict:
+def bench_region(region: dict, resolutions, tmp: Path) -> dict:
+    """Ours at each resolution (mm), both Solidify modes, then the parts of the finest shell (module doc)."""
     import numpy as np
 
     from bolus_addon.core.solid import SIDE_OUTER
@@ -509,7 +491,7 @@ def bench_region(region: dict, args, tmp: Path) -> dict:
     row = {"region": name, "how": region["how"], "faces": int(len(F)), "runs": [], "parts": None}
     skin = {"V": V, "F": F}
     shells = {}
-    for res in args.resolutions:
+    for res in resolutions:
         key = f"ours {res:g} mm"
         try:
             out, st = run_worker("ours", skin, tmp, thickness=t, resolution=res)
@@ -525,7 +507,9 @@ def bench_region(region: dict, args, tmp: Path) -> dict:
             out, st = run_worker("solidify", skin, tmp, thickness=t, mode=mode)
             off = out["layer"] == 1
             m = measure_solid(out["V"], out["F"], off, V, F, t)
-            m["folded"] = folded_triangles(out["V"], out["F"][off], out["src"][off], V, F)
+            fm = folded_mask(out["V"], out["F"][off], out["src"][off], V, F)
+            far = (border_distance(V, F)[F] > t).all(axis=1)  # source faces farther than t from the border
+            m["folded"], m["folded_far"] = int(fm.sum()), int((fm & far[out["src"][off]]).sum())
             m["offset_triangles"] = int(off.sum())
             vol = m["closed"]["volume_mm3"]
             run = {"method": key, **st, **m, "volume_mm3": vol}
@@ -537,7 +521,7 @@ def bench_region(region: dict, args, tmp: Path) -> dict:
         row["parts"] = {"note": "core.solid_parts.split_solid is not there yet: parts not benchmarked"}
         print(f"   parts: {row['parts']['note']}")
         return row
-    res = args.parts_resolution
+    res = min(resolutions)
     if res not in shells:
         row["parts"] = {"note": f"no {res:g} mm shell to split"}
         print(f"   parts: {row['parts']['note']}")
@@ -586,6 +570,10 @@ def closed_text(rep: dict) -> str:
     return "no (" + ", ".join(bits) + " edges)" if bits else "no"
 
 
+def cpu_text(r: dict) -> str:
+    return _f(r.get("cpu_seconds"))
+
+
 def mem_text(r: dict) -> str:
     d = r.get("peak_delta_mb")
     return _f(d, "{:.0f}") if d is not None else f"<= {r['peak_mb']:.0f}"
@@ -599,8 +587,11 @@ def print_run(r: dict, t: float) -> None:
           f"closed {closed_text(r['closed'])}, volume {r['closed']['volume_mm3'] / 1000:.2f} cm³, thickness "
           f"{_f(th['min'])} / {_f(th['mean'])} / {_f(th['max'])} mm on {th['rays']} rays ({th['missed']} missed, "
           f"{th['thin']} below {0.95 * t:g} mm), {r['self_intersections']} self-intersecting pairs"
-          + (f", {r['folded']} folded of {r['offset_triangles']} offset triangles" if r.get("folded") is not None
-             else ""))
+          + (f", {r['folded']} folded of {r['offset_triangles']} offset triangles ({r['folded_far']} on skin "
+             f"faces farther than {t:g} mm from the border)" if r.get("folded") is not None else ""))
+    if r["self_intersections"]:
+        print("     first intersecting pairs near " + ", ".join(f"({x:.1f}, {y:.1f}, {z:.1f})"
+                                                             for x, y, z in r["self_intersection_spots"]) + " mm")
     for w in r.get("warnings", []) or []:
         print(f"     warning: {w}")
 
@@ -629,9 +620,11 @@ def pct_text(x) -> str:
 
 
 def shell_table(rows: list[dict], t: float) -> Table:
-    tab = Table([("region", "<"), ("method", "<"), ("time s", ">"), ("peak MB", ">"), ("triangles", ">"),
+    tab = Table([("region", "<"), ("method", "<"), ("time s", ">"), ("cpu s", ">"), ("peak MB", ">"),
+                 ("triangles", ">"),
                  ("closed", "<"), ("volume cm³", ">"), ("t min", ">"), ("t mean", ">"), ("t max", ">"),
-                 (f"rays < {0.95 * t:g} / missed", ">"), ("folded", ">"), ("self-int. pairs", ">")])
+                 (f"rays < {0.95 * t:g} / missed", ">"), (f"folded (> {t:g} mm from border)", ">"),
+                 ("self-int. pairs", ">")])
     for row in rows:
         if "error" in row:
             tab.add_error(row["region"], row["error"])
@@ -642,16 +635,18 @@ def shell_table(rows: list[dict], t: float) -> Table:
                 tab.add_error(f"{first}: {r['method']}", r["error"])
                 continue
             th = r["thickness"]
-            tab.add(first, r["method"], f"{r['seconds']:.2f}", mem_text(r), r["triangles"], closed_text(r["closed"]),
+            tab.add(first, r["method"], f"{r['seconds']:.2f}", cpu_text(r), mem_text(r), r["triangles"],
+                    closed_text(r["closed"]),
                     f"{r['closed']['volume_mm3'] / 1000:.2f}", _f(th["min"]), _f(th["mean"]), _f(th["max"]),
                     f"{th['thin']} / {th['missed']} of {th['rays']}",
-                    "n/a" if r.get("folded") is None else f"{r['folded']} of {r['offset_triangles']}",
+                    "n/a" if r.get("folded") is None
+                    else f"{r['folded']} ({r['folded_far']}) of {r['offset_triangles']}",
                     r["self_intersections"])
     return tab
 
 
 def parts_table(rows: list[dict]) -> Table:
-    tab = Table([("region", "<"), ("shell", ">"), ("parts", ">"), ("split s", ">"), ("peak MB", ">"),
+    tab = Table([("region", "<"), ("shell", ">"), ("parts", ">"), ("split s", ">"), ("cpu s", ">"), ("peak MB", ">"),
                  ("closed", ">"), ("Σ volume / shell", ">"), ("connectors", ">"), ("support parts mm³", ">"),
                  ("support whole mm³", ">"), ("ratio", ">")])
     for row in rows:
@@ -662,24 +657,28 @@ def parts_table(rows: list[dict]) -> Table:
             tab.add_error(row["region"], p.get("note") or p.get("error"))
             continue
         sp, sw = sum(p["parts_support_mm3"]), p["whole_support_mm3"]
-        tab.add(row["region"], f"{p['resolution']:g} mm", p["part_count"], f"{p['seconds']:.2f}", mem_text(p),
+        tab.add(row["region"], f"{p['resolution']:g} mm", p["part_count"], f"{p['seconds']:.2f}", cpu_text(p),
+                mem_text(p),
                 f"{sum(p['parts_closed'])}/{p['part_count']}", pct_text(p["volume_sum_ratio"]),
                 sum(j["connectors"] for j in p["joints"]), f"{sp:.0f}", f"{sw:.0f}",
                 f"{sp / sw:.2f}" if sw > 0 else "n/a")
     return tab
 
 
-def legend(args) -> str:
+def legend() -> str:
     return (f"Shell {THICKNESS_MM:g} mm thick. Ours: `core.shell.make_shell(thickness={THICKNESS_MM:g}, "
-            f"resolution=r)` for r in {', '.join(f'{r:g}' for r in args.resolutions)} mm; the peer: Blender's "
+            "resolution=r)` (r in the method column; the skin's other faces are not passed); the peer: Blender's "
             "Solidify, complex mode (`NON_MANIFOLD`), `offset=+1`, rim filled, `use_even_offset`, thickness mode "
             "EVEN or CONSTRAINTS (Blender's default), evaluated through the depsgraph. Each call runs alone in a "
-            "child process: time = the call alone, peak MB = the child's VmHWM during the call minus its RSS before "
-            "it. Closed: every edge has two faces with opposite directions (`core.solid.closed_report`). Thickness "
+            "child process: time = the call alone (wall clock), cpu = the CPU time of all its threads (less "
+            "dependent on the load of the shared machine), peak MB = the child's VmHWM during the call minus its "
+            "RSS before it. Closed: every edge has two faces with opposite directions "
+            "(`core.solid.closed_report`). Thickness "
             f"(SPEC, one measure for both): rays from the skin vertices farther than {THICKNESS_MM:g} mm from the "
             "region's border, along the skin's vertex normal, to the first hit on the outer face (ours: "
             "`SIDE_OUTER` faces; Solidify: its offset layer), `BVHTree.ray_cast`; missed = no hit within "
-            f"{RAY_MAX:g} t. Folded: offset-layer triangles whose normal turned against their source face's. "
+            f"{RAY_MAX:g} t. Folded: offset-layer triangles whose normal turned against their source face's (in "
+            f"brackets: those whose source face lies farther than {THICKNESS_MM:g} mm from the border). "
             "Self-intersecting pairs: `BVHTree.overlap` of the solid with itself, pairs sharing a vertex left out")
 
 
@@ -691,10 +690,10 @@ def parts_legend() -> str:
             "(`print_orientation.orient`), against the whole shell's in its own best orientation")
 
 
-def markdown(rows: list[dict], args, argv) -> str:
+def markdown(rows: list[dict], argv) -> str:
     regions = "; ".join(f"**{r['region']}**: {r['how']}" for r in rows if "how" in r)
     out = ["## Printed bolus (`bench/shell_bench.py`)", "", benchutil.run_line("shell_bench.py", argv), "",
-           f"Regions: {regions}.", "", legend(args) + ".", "", shell_table(rows, THICKNESS_MM).markdown()]
+           f"Regions: {regions}.", "", legend() + ".", "", shell_table(rows, THICKNESS_MM).markdown()]
     pt = parts_table(rows)
     if pt.rows:
         out += ["", parts_legend() + ".", "", pt.markdown()]
@@ -704,16 +703,23 @@ def markdown(rows: list[dict], args, argv) -> str:
 # ----------------------------------------------------------------------------- main
 
 
+def resolutions_for(name: str, args) -> tuple:
+    """The resolutions (mm) ours runs at on region ``name``: --resolution, else --quick's, else RESOLUTIONS."""
+    if args.resolution:
+        return tuple(sorted(set(args.resolution)))
+    return RESOLUTIONS_QUICK if args.quick else RESOLUTIONS[name]
+
+
 def main(argv=None) -> int:
     ap = benchutil.parser(__doc__, "the example nose region at 1.0 mm only", repeat=None)
-    ap.add_argument("--worker", metavar="JOB", help=argparse_hidden())
+    ap.add_argument("--worker", metavar="JOB", help=argparse.SUPPRESS)
+    ap.add_argument("--resolution", metavar="MM", type=float, action="append", default=[],
+                    help="run ours at this resolution on every region (repeatable; default: RESOLUTIONS)")
     ap.add_argument("--only", metavar="NAME", action="append", default=[],
                     help="bench only the regions whose name contains NAME (repeatable)")
     args = ap.parse_args(argv)
     if args.worker:
         return worker(args.worker)
-    args.resolutions = RESOLUTIONS_QUICK if args.quick else RESOLUTIONS
-    args.parts_resolution = min(args.resolutions)
 
     import bpy
     import numpy as np
@@ -734,26 +740,21 @@ def main(argv=None) -> int:
                 rows.append(benchutil.error_row("region", name, exc))
                 continue
             try:
-                rows.append(bench_region(region, args, Path(td)))
+                rows.append(bench_region(region, resolutions_for(name, args), Path(td)))
             except Exception as exc:
                 rows.append(benchutil.error_row("region", name, exc))
     total = time.perf_counter() - t_start
-    print("\n" + legend(args) + ".")
+    print("\n" + legend() + ".")
     print(shell_table(rows, THICKNESS_MM).text())
     pt = parts_table(rows)
     if pt.rows:
         print("\n" + parts_legend() + ".")
         print(pt.text())
     benchutil.finish(args, {"quick": args.quick, "thickness_mm": THICKNESS_MM,
-                            "resolutions_mm": list(args.resolutions), "units": "lengths mm, volumes mm³, seconds",
-                            "regions": rows}, total, markdown(rows, args, argv))
+                            "resolutions_mm": {n: list(resolutions_for(n, args)) for n in names},
+                            "units": "lengths mm, volumes mm³, seconds",
+                            "regions": rows}, total, markdown(rows, argv))
     return 0
-
-
-def argparse_hidden():
-    import argparse
-
-    return argparse.SUPPRESS
 
 
 if __name__ == "__main__":

@@ -135,44 +135,16 @@ def test_solidify_folds_in_a_tight_bowl(sb, bpy):
     assert sb.self_intersections(r["V"], r["F"]) > 0
 
 
-@pytest.mark.blender
-def test_demo_selection_is_the_demos(sb, bpy):
-    """The array version of the demo's selection picks the same polygons as scripts/demo.py in Blender."""
-    from bolus_addon.core.objfile import load_obj
-
-    sys.path.insert(0, str(BENCH.parent / "scripts"))
-    try:
-        demo = importlib.import_module("demo")
-    finally:
-        sys.path.remove(str(BENCH.parent / "scripts"))
-    if not hasattr(demo, "select_treatment_area"):
-        pytest.skip("scripts/demo.py no longer has its own selection")
-    import benchutil
-
-    path = BENCH.parent / "assets" / "ict_face_narrow.obj"
-    benchutil.clean_scene(bpy)
-    with benchutil.captured_output():
-        bpy.ops.wm.obj_import(filepath=str(path), global_scale=10.0)  # as demo.load_example: cm -> mm
-    ob = bpy.context.selected_objects[0]
-    bpy.context.view_layer.objects.active = ob
-    bpy.ops.object.transform_apply(location=False, rotation=True, scale=True)
-    want = np.asarray(demo.select_treatment_area(ob, sb.NOSE_RADIUS_MM))
-    V, F, tri_face = load_obj(path, 10.0)
-    got = sb.demo_selection(V, F, tri_face)
-    poly = np.zeros(int(tri_face.max()) + 1, dtype=bool)
-    poly[tri_face[got]] = True
-    assert want.sum() > 100 and np.array_equal(poly, want)
-    benchutil.clean_scene(bpy)
-
-
 def fake_rows():
     th = {"rays": 100, "missed": 1, "thin": 2, "min": 9.5, "mean": 10.0, "max": 10.5}
     rep = {"closed": False, "boundary_edges": 3, "nonmanifold_edges": 0, "inconsistent_edges": 0,
            "volume_mm3": 12345.0}
-    run = {"method": "ours 1 mm", "seconds": 1.0, "peak_mb": 300.0, "peak_delta_mb": 50.0, "triangles": 10,
-           "closed": {**rep, "closed": True}, "thickness": th, "self_intersections": 0, "folded": None}
-    sol = {**run, "method": "Solidify even", "closed": rep, "folded": 4, "offset_triangles": 8}
-    parts = {"resolution": 1.0, "seconds": 2.0, "peak_delta_mb": 10.0, "part_count": 3,
+    run = {"method": "ours 1 mm", "seconds": 1.0, "cpu_seconds": 1.5, "peak_mb": 300.0, "peak_delta_mb": 50.0,
+           "triangles": 10,
+           "closed": {**rep, "closed": True}, "thickness": th, "self_intersections": 0,
+           "self_intersection_spots": [], "folded": None}
+    sol = {**run, "method": "Solidify even", "closed": rep, "folded": 4, "folded_far": 1, "offset_triangles": 8}
+    parts = {"resolution": 1.0, "seconds": 2.0, "cpu_seconds": 2.5, "peak_delta_mb": 10.0, "part_count": 3,
              "parts_closed": [True, True, False], "volume_sum_ratio": 0.999, "joints": [{"connectors": 2}] * 2,
              "parts_support_mm3": [10.0, 20.0, 30.0], "whole_support_mm3": 120.0}
     return [{"region": "r", "faces": 5, "how": "h", "runs": [run, sol, {"method": "x", "error": "E: no"}],
@@ -185,13 +157,21 @@ def test_tables_keep_their_columns(sb):
     rows = fake_rows()
     md = sb.shell_table(rows, T).markdown().splitlines()
     assert len({line.count("|") for line in md}) == 1
-    assert "| no (3 boundary edges) |" in md[3] and "| 4 of 8 |" in md[3] and "| 2 / 1 of 100 |" in md[2]
+    assert "| no (3 boundary edges) |" in md[3] and "| 4 (1) of 8 |" in md[3] and "| 2 / 1 of 100 |" in md[2]
     assert any("ERROR: E: no" in line for line in md) and any("ERROR: ValueError: bad" in line for line in md)
     pt = sb.parts_table(rows).markdown().splitlines()
     assert len({line.count("|") for line in pt}) == 1
     assert "| 2/3 | 99.90 % | 4 | 60 | 120 | 0.50 |" in pt[2] and "ERROR: no parts" in pt[3]
-    text = sb.markdown(rows, argparse.Namespace(resolutions=(1.0,)), [])
+    text = sb.markdown(rows, [])
     assert text.startswith("## Printed bolus") and "Σ volume / shell" in text
+
+
+def test_resolutions_per_region(sb):
+    ns = argparse.Namespace
+    assert sb.resolutions_for("example nose", ns(resolution=[], quick=False)) == (0.5, 1.0)
+    assert sb.resolutions_for("nefertiti face", ns(resolution=[], quick=True)) == (1.0,)
+    assert sb.resolutions_for("nefertiti face", ns(resolution=[1.0, 0.5, 1.0], quick=True)) == (0.5, 1.0)
+    assert set(sb.RESOLUTIONS) == set(sb.REGIONS) and set(sb.QUICK_REGIONS) <= set(sb.REGIONS)
 
 
 @pytest.mark.blender
@@ -200,8 +180,7 @@ def test_bench_region_smoke_run(sb, bpy, tmp_path):
     """The whole per-region run on a small cap, ours in a child process: every figure there and sane."""
     V, F = meshgen.spherical_cap(60.0, 30, 4)
     region = {"name": "cap", "V": V, "F": F, "how": "meshgen.spherical_cap(60, 30, 4)"}
-    args = argparse.Namespace(resolutions=(2.0,), parts_resolution=2.0)
-    row = sb.bench_region(region, args, tmp_path)
+    row = sb.bench_region(region, (2.0,), tmp_path)
     assert [r["method"] for r in row["runs"]] == ["ours 2 mm", "Solidify even", "Solidify constraints"]
     for r in row["runs"]:
         assert "error" not in r, r
