@@ -418,3 +418,23 @@ def test_degenerate_solid_is_refused_as_not_closed(name):
     side2 = np.r_[side[order], np.full(len(F2) - len(F), SIDE_OUTER)]
     with pytest.raises(BolusError, match="not a closed solid"):
         split_solid(V2, F2, side2, *SKIN, sectors(*SKIN, 2))
+
+
+def test_a_crumb_of_the_solid_is_left_out_with_a_warning():
+    V, F, side = CAP
+    cV, cF = from_manifold(m3.Manifold.cube((0.5, 0.5, 0.5)).translate((0.0, 0.0, 80.0)))
+    V2, F2 = np.vstack([V, cV]), np.vstack([F, cF + len(V)])
+    side2 = np.r_[side, np.full(len(cF), SIDE_OUTER)]
+    res = split_solid(V2, F2, side2, *SKIN, sectors(*SKIN, 2), connectors=False)
+    assert any("1 separate crumb" in w and "0.125 mm³" in w for w in res.warnings)
+    assert_closed_parts(res, 2)
+    assert res.solid_volume_mm3 == pytest.approx(closed_report(V, F)["volume_mm3"] + 0.125, rel=1e-9)
+    assert res.plain_volumes_mm3.sum() == pytest.approx(res.solid_volume_mm3 - 0.125, rel=1e-9)
+
+
+def test_cells_cut_off_from_their_part_join_the_part_they_touch():
+    # cells 0-1-2 in a row, 3 touches only 2: voted to part 0 (the skin under its outer face), it goes to part 1
+    owners = sp._connected_owners([0, 0, 1, 0], [10.0, 10.0, 10.0, 0.5], {(0, 1): 5.0, (1, 2): 5.0, (2, 3): 1.0})
+    assert owners == [0, 0, 1, 1]
+    # a group with no neighbour stays where the skin put it
+    assert sp._connected_owners([0, 1, 0], [10.0, 10.0, 1.0], {(0, 1): 5.0}) == [0, 1, 0]

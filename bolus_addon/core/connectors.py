@@ -252,7 +252,9 @@ def _local(part: m3.Manifold, centre, half: float) -> m3.Manifold:
     """The part clipped to a cube of half-size ``half`` around ``centre`` (the checks of one
     connector then work on a few hundred triangles instead of the whole part)."""
     box = m3.Manifold.cube((2 * half, 2 * half, 2 * half), True).translate(tuple(np.asarray(centre, float)))
-    return part ^ box
+    out = part ^ box
+    out.num_tri()  # evaluate now: manifold3d is lazy, the checks would redo the clip each time
+    return out
 
 
 def _try_connector(peg_part, hole_part, centre, axis, nrm, off, r, length, clearance, keep_peg, keep_hole):
@@ -356,7 +358,7 @@ def add_joint_connectors(parts: list, pair: tuple, plane, axis, candidates: list
                     continue
                 x1 = x0 + dlt * u
                 trials = [(x1, L)] + [(x1 + d * u, L) for d in SHIFTS] + [(x1, l) for l in _lengths(length) if l < L]
-            half = length + clearance + WALL_MIN + e + r + clearance + WALL_MIN + MAX_SHIFT + 1.0
+            half = max(r + clearance + WALL_MIN + MAX_SHIFT + max(SHIFTS), length + clearance + WALL_MIN + e) + 0.5
             P_loc, H_loc = _local(parts[p], x0, half), _local(parts[h], x0, half)
             for x, L in trials:
                 if any(np.linalg.norm(x - d.centre) < 2.0 * (r + clearance) + WALL_MIN for d in done):

@@ -60,6 +60,9 @@ MAX_SVM_POINTS = 5000  #: per class; larger parts are subsampled (rng)
 MAX_EXTRA_PLANES = 4  #: separating planes added for cells of two parts in one arrangement region
 MIN_JOINT_AREA = 1.0  #: mm^2: two parts touching on less of a plane have no joint (a corner)
 WRONG_SIDE_WARN = 0.05  #: warn when a joint plane leaves more than 5 % of the two parts' skin vertices on the wrong side
+CRUMB_MM3 = 1.0  #: separate pieces of the solid smaller than this are left out (with a warning)
+ON_PLANE_TOL = 1e-6  #: mm: a face with all corners this close to a plane lies on it
+MIN_CONTACT_AREA = 1e-3  #: mm^2: cells sharing less plane face than this do not touch
 VOLUME_RTOL = 1e-6  #: parts' volumes must add up to the solid's to this relative round-off
 
 
@@ -202,6 +205,94 @@ def _areas_centroids(V, F):
 
 # ----------------------------------------------------------------------------- cells
 
+def _drop_crumbs(M: m3.Manifold, warnings: list) -> m3.Manifold:
+    """The solid without separate pieces under CRUMB_MM3 (a slicer drops them anyway), with a warning."""
+    comps = M.decompose()
+    if len(comps) < 2:
+        return M
+    vol = [float(c.volume()) for c in comps]
+    keep = [c for c, v in zip(comps, vol) if v >= CRUMB_MM3]
+    gone = [(c, v) for c, v in zip(comps, vol) if v < CRUMB_MM3]
+    if not gone or not keep:
+        return M
+    at = np.asarray(gone[0][0].bounding_box()).reshape(2, 3).mean(axis=0)
+    warnings.append(f"the solid has {len(gone)} separate crumb(s) under {CRUMB_MM3:g} mm³ "
+                    f"({sum(v for _, v in gone):.3g} mm³ in all, e.g. at ({at[0]:.1f}, {at[1]:.1f}, {at[2]:.1f}) mm): "
+                    "left out of the parts")
+    return m3.Manifold.compose(keep) if len(keep) > 1 else keep[0]
+
+
+def _cell_sections(cells, planes) -> list[dict]:
+    """Per cell {plane: CrossSection of its faces on that plane (plane frame)}."""
+    out = []
+    for c in cells:
+        V, F = from_manifold(c)
+        D = V @ planes[:, :3].T + planes[:, 3]
+        secs = {}
+        for p in range(len(planes)):
+            on = np.all(np.abs(D[F, p]) < ON_PLANE_TOL, axis=1)
+            if on.any():
+                origin, U = conn.plane_frame(planes[p, :3], planes[p, 3])
+                secs[p] = conn.section_of_triangles(conn.to_plane(V[F[on]].reshape(-1, 3), origin, U).reshape(-1, 3, 2))
+        out.append(secs)
+    return out
+
+
+def _cell_contacts(secs: list[dict]) -> dict:
+    """{(a, b): area (mm^2) of the plane faces cells a < b share}."""
+    contacts = {}
+    for a in range(len(secs)):
+        for b in range(a + 1, len(secs)):
+            area = sum(float((secs[a][p] ^ secs[b][p]).area()) for p in set(secs[a]) & set(secs[b]))
+            if area > MIN_CONTACT_AREA:
+                contacts[(a, b)] = area
+    return contacts
+
+
+def _connected_owners(owners: list, vols: list, contacts: dict) -> list:
+    """Owners changed so every part's cells hang together: a group of a part's cells cut off
+    from its largest group goes to the neighbour it shares the most face with (a sliver a
+    plane cuts off along the rim votes for the skin under its outer face, which need not
+    be the part it touches)."""
+    owners = list(owners)
+    adj: dict = {i: [] for i in range(len(owners))}
+    for (a, b), area in contacts.items():
+        adj[a].append((b, area))
+        adj[b].append((a, area))
+    for _ in range(len(owners)):
+        seen, groups = set(), {}
+        for i in range(len(owners)):
+            if i in seen:
+                continue
+            stack, comp = [i], []
+            seen.add(i)
+            while stack:
+                x = stack.pop()
+                comp.append(x)
+                for y, _ in adj[x]:
+                    if y not in seen and owners[y] == owners[i]:
+                        seen.add(y)
+                        stack.append(y)
+            groups.setdefault(owners[i], []).append(comp)
+        changed = False
+        for q, comps in groups.items():
+            comps.sort(key=lambda c: -sum(vols[i] for i in c))
+            for comp in comps[1:]:
+                shared: dict = {}
+                for x in comp:
+                    for y, area in adj[x]:
+                        if owners[y] != q:
+                            shared[owners[y]] = shared.get(owners[y], 0.0) + area
+                if shared:
+                    new = max(shared, key=shared.get)
+                    for x in comp:
+                        owners[x] = new
+                    changed = True
+        if not changed:
+            break
+    return owners
+
+
 def _split_cells(cells, owners, normal, offset):
     """Cells (list of Manifold) split by one plane into connected pieces; owners inherited."""
     out, own = [], []
@@ -317,6 +408,7 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
     if not solid_volume > 0:
         raise BolusError("the solid has no volume (is it wound inside out?)")
     warnings: list[str] = []
+    M = _drop_crumbs(M, warnings)
     skin_topo = MeshTopology(skin_V, skin_F)
 
     # 1-2: neighbours and their planes
@@ -343,6 +435,8 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
         cells, owners = _split_cells(cells, owners, n_off[:3], n_off[3])
     owners = [_cell_owner(c, rid, side, tree, lab, k) for c in cells]
     vols = [float(c.volume()) for c in cells]
+    if len(cells) > 1:
+        owners = _connected_owners(owners, vols, _cell_contacts(_cell_sections(cells, planes)))
     extra = 0
     while True:
         signs = [_signs(c, planes) for c in cells] if len(planes) else [() for _ in cells]
@@ -378,7 +472,7 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
         best = max(per, key=per.get)
         owner_of[s] = best
         for o, v in per.items():
-            if o != best:
+            if o != best and v >= CRUMB_MM3:
                 warnings.append(f"{v:.0f} mm³ of part {o}'s material lies on part {best}'s side of every joint "
                                 f"plane and goes with part {best} (a plane crosses the shell twice there)")
     if extra:
@@ -415,9 +509,21 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
         K = polys[0] if len(polys) == 1 else m3.Manifold.batch_boolean(polys, m3.OpType.Add)
         part_M.append(M ^ K)
         report(0.4 + 0.3 * (q + 1) / k, f"part {q}")
+    slivers = []
+    for q, P in enumerate(part_M):
+        pieces = P.decompose() if not P.is_empty() else []
+        small = [c for c in pieces if c.volume() < CRUMB_MM3]
+        if small and len(small) < len(pieces):
+            big = [c for c in pieces if c.volume() >= CRUMB_MM3]
+            part_M[q] = m3.Manifold.compose(big) if len(big) > 1 else big[0]
+            slivers += [float(c.volume()) for c in small]
+    if slivers:
+        warnings.append(f"{len(slivers)} sliver(s) under {CRUMB_MM3:g} mm³ that the joint planes cut off "
+                        f"({sum(slivers):.3g} mm³ in all) are left out of the parts")
     plain = np.array([float(P.volume()) for P in part_M])
-    if abs(plain.sum() - solid_volume) > VOLUME_RTOL * solid_volume + 1e-6:
-        warnings.append(f"the parts' volumes add up to {plain.sum():.1f} mm³, the solid's is {solid_volume:.1f} mm³")
+    kept = float(M.volume()) - sum(slivers)
+    if abs(plain.sum() - kept) > VOLUME_RTOL * kept + 1e-6:
+        warnings.append(f"the parts' volumes add up to {plain.sum():.1f} mm³, the solid's is {kept:.1f} mm³")
     for q, P in enumerate(part_M):
         if P.is_empty():
             continue
