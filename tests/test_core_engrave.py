@@ -277,6 +277,10 @@ def test_bad_arguments():
         engrave_text(V, F, side[:-1], LO)
     with pytest.raises(BolusError, match="up"):
         engrave_text(V, F, side, LO, up=(0, 0, 0))
+    with pytest.raises(BolusError, match="at must be"):
+        engrave_text(V, F, side, LO, at=(np.inf, 0, 0))
+    with pytest.raises(BolusError, match="positive"):
+        engrave_text(V, F, side, LO, depth_mm=0.0)
     with pytest.raises(BolusError, match="outline"):
         engrave_text(V, F, side, TextOutline([], 0.0))
     with pytest.raises(BolusError, match="left"):
@@ -343,3 +347,21 @@ def test_overhang_does_not_split_the_letters(gap):
             assert volume(V, F) - volume(V2, F2) == pytest.approx(AREA_LO * 36 * DEPTH, rel=0.10)
     if gap > 10:  # a roof far above does not hide the top below it: engraved there (regression: the
         assert notes[(47.0, 20.0, 8.0)] is None  # letters were once bent up onto the roof, then refused)
+
+
+def test_long_label_turns_along_a_narrow_strip():
+    """A strip 18 mm wide across the reading direction: the label runs along the strip instead,
+    still reading towards the patient's left (+x), i.e. its x axis has a positive x part."""
+    V, F, side = slab((18.0, 120.0, 8.0), n=12)
+    V = V @ np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]])
+    label = text(GLYPH_L, GLYPH_O, GLYPH_L, GLYPH_O)  # 4.5 caps wide: 27 mm at 6 mm, more than 18 mm
+    outlines = {"X": label, "L": TextOutline(GLYPH_L, 0.7), "R": text(GLYPH_O)}
+    V2, F2, s2, warnings = engrave_labels(V, F, side, outlines, "X", (1.0, 0.0, 0.0))
+    assert not any("'X'" in w for w in warnings)
+    C = V2[F2].mean(axis=1)
+    floor = C[np.abs(C[:, 2] - (8 - DEPTH)) < 1e-6]
+    # the label is the floor cluster near the middle of the strip (the markers sit at its ends)
+    mid = floor[np.abs(floor[:, 1] - 60.0) < 20.0]
+    assert np.ptp(mid[:, 1]) > 20.0 and np.ptp(mid[:, 0]) < 10.0
+    removed = volume(V, F) - volume(V2, F2)
+    assert removed >= 2 * (AREA_L + AREA_O) * LABEL_HEIGHTS[-1] ** 2 * DEPTH * 0.9

@@ -492,7 +492,9 @@ def engrave_text(V, F, side, text: TextOutline, *, height_mm=6.0, depth_mm=0.6, 
     _check_text(text, "engrave_text")
     if not (0 < height_mm <= 1000) or not (0 < depth_mm <= 50):
         raise BolusError(f"engrave_text: height {height_mm} mm and depth {depth_mm} mm must be positive")
-    at = None if at is None else np.asarray(at, dtype=np.float64).reshape(3)
+    at = None if at is None else np.asarray(at, dtype=np.float64).reshape(-1)
+    if at is not None and (at.shape != (3,) or not np.isfinite(at).all()):
+        raise BolusError(f"engrave_text: at must be a finite 3D point, got {at}")
     up = None if up is None else _direction(up, "engrave_text: up")
     progress = progress or (lambda f, t: None)
     progress(0.0, "engraving: finding a spot")
