@@ -196,14 +196,16 @@ def test_two_parts_are_closed_and_add_up(two):
     assert res.warnings == []
 
 
+def area_by_side(V, F, side, s):
+    F = F[side == s]
+    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
+
+
 def test_two_parts_faces_keep_their_side(two):
     res = two
     V, F, side = CAP
-    A = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
-    Ar = 0.5 * np.linalg.norm(np.cross(res.V[res.F[:, 1]] - res.V[res.F[:, 0]],
-                                       res.V[res.F[:, 2]] - res.V[res.F[:, 0]]), axis=1)
     for s in (SIDE_INNER, SIDE_OUTER):  # the cut and the connectors leave the skin side and the outer face whole
-        assert Ar[res.side == s].sum() == pytest.approx(A[side == s].sum(), rel=1e-6)
+        assert area_by_side(res.V, res.F, res.side, s) == pytest.approx(area_by_side(V, F, side, s), rel=1e-6)
     (J,) = res.joints
     cut = res.F[res.side == SIDE_CUT]
     d = res.V[cut] @ J.normal + J.offset
@@ -430,6 +432,8 @@ def test_a_crumb_of_the_solid_is_left_out_with_a_warning():
     assert_closed_parts(res, 2)
     assert res.solid_volume_mm3 == pytest.approx(closed_report(V, F)["volume_mm3"] + 0.125, rel=1e-9)
     assert res.plain_volumes_mm3.sum() == pytest.approx(res.solid_volume_mm3 - 0.125, rel=1e-9)
+    assert area_by_side(res.V, res.F, res.side, SIDE_INNER) == pytest.approx(area_by_side(V, F, side, SIDE_INNER),
+                                                                            rel=1e-6)  # the faces keep their side
 
 
 def test_cells_cut_off_from_their_part_join_the_part_they_touch():

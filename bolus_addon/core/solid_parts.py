@@ -19,20 +19,27 @@ built on and a part label per skin triangle (the area-balanced cut of
 3. cells: the solid split by every plane (``Manifold.split_by_plane``), each connected
    piece (``decompose``) a cell.  A plane reaches beyond its joint and may cross the shell
    elsewhere, so a cell goes to the part whose skin lies under it (area vote of the
-   nearest skin triangles of the cell's inner faces; all its faces if it has none).
-   Every cell lies in one region of the plane arrangement (a sign per plane).  Two cells
-   of different parts in one region (a plane crossing a strongly curved shell twice) get
-   an extra separating plane (the same SVM on their vertices) as long as that helps, at
-   most MAX_EXTRA_PLANES; what is left is given to the larger and warned about.
+   nearest skin triangles of the cell's inner faces; all its faces if it has none); then
+   a group of a part's cells cut off from the part's largest group goes to the part it
+   shares most plane face with (a sliver along the rim votes for the skin under its outer
+   face, which need not be the part it touches).  Every cell lies in one region of the
+   plane arrangement (a sign per plane).  Two cells of different parts in one region (a
+   plane crossing a strongly curved shell twice) get an extra separating plane (the same
+   SVM on their vertices) as long as that helps, at most MAX_EXTRA_PLANES; what is left
+   goes with the larger and is warned about.
 4. parts: manifold3d cannot glue pieces back together (the union of two halves of a cut
    keeps the cut as a slit), so each part is cut out of the whole solid once:
    part q = solid ∩ K_q, K_q a union of convex polytopes (the bounding box trimmed by
    planes): one per cell region of q grown over all regions that hold no material and
    one more over each two neighbouring regions of q (so no two polytopes of K_q merely
    touch inside the solid).  The parts are closed by construction and their volumes add
-   up to the solid's to round-off; a part that falls into pieces is warned about.
+   up to the solid's to round-off.  Separate crumbs of the solid and slivers the planes
+   cut off, under CRUMB_MM3 each, are left out with a warning (a slicer drops them too);
+   a part that still falls into pieces is warned about.
 5. joints: the faces two parts share on one plane (2D CrossSections of their cut faces,
-   intersected); each gets connectors (`connectors`), or a note why not.
+   intersected).  The largest face of each pair gets the connectors (`connectors`: sized
+   from the wall thickness at the joint, placed near the two ends of the face, each part
+   one peg and one hole), or a note (and a warning) why not.
 
 Faces: the solid's faces keep their ``side`` (manifold3d carries the face ids through the
 booleans), faces on a joint plane are SIDE_CUT, peg and hole walls SIDE_CONNECTOR.
@@ -75,7 +82,8 @@ class Joint:
     offset: float
     area_mm2: float
     connectors: list = field(default_factory=list)  #: [Connector]
-    note: str | None = None  #: why it has fewer than two connectors (None: it has two)
+    note: str | None = None  #: why it has fewer than two connectors (None: it has two); a pair's smaller faces on
+    #: other planes say "a second, ... face" and carry none
     thickness_mm: float = float("nan")  #: wall thickness at the joint (median over the joint face's edge;
     #: without inner/outer faces: the diameter of the largest circle inside the joint face)
     plane: int = -1  #: index of its plane among `SolidParts.planes`
@@ -448,7 +456,7 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
             per = {}
             for ci in cis:
                 per[owners[ci]] = per.get(owners[ci], 0.0) + vols[ci]
-            if len(per) > 1:
+            if len(per) > 1 and sorted(per.values())[-2] >= CRUMB_MM3:  # slivers are not worth a plane
                 conflict = (s, cis, per)
                 break
         if conflict is None or extra >= MAX_EXTRA_PLANES:
@@ -458,7 +466,7 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
         pts = [np.vstack([np.asarray(cells[ci].to_mesh64().vert_properties)[:, :3] for ci in cis
                           if owners[ci] == o]) for o in top]
         n, off, wrong = svm_plane(pts[0], pts[1], rng)
-        if wrong > 0.0:
+        if wrong > 0.01:
             break  # the two parts' pieces in this region cannot be told apart by a plane
         planes = np.vstack([planes, np.r_[n, off]])
         cells, owners = _split_cells(cells, owners, n, off)
@@ -540,7 +548,7 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
     keepout: dict = {}
     wall = _wall_probe(V, F, side)
     for J in sorted(joints, key=lambda J: -J.area_mm2):
-        if J.note is not None:  # a corner face next to the pair's main joint
+        if J.note is not None:  # a second face of a pair: the pair's main joint carries the connectors
             continue
         if not connectors:
             J.note = "connectors not asked for"
