@@ -442,3 +442,42 @@ def test_cells_cut_off_from_their_part_join_the_part_they_touch():
     assert owners == [0, 0, 1, 1]
     # a group with no neighbour stays where the skin put it
     assert sp._connected_owners([0, 1, 0], [10.0, 10.0, 1.0], {(0, 1): 5.0}) == [0, 1, 0]
+
+
+# ----------------------------------------------------------------------------- connector helpers
+
+def test_sections_and_inscribed_circle():
+    T = np.array([[[0, 0], [100, 0], [100, 10]], [[0, 0], [0, 10], [100, 10]],  # one counter-clockwise, one not
+                  [[5, 5], [5, 5], [6, 5]]], dtype=float)  # zero area: dropped
+    cs = conn.section_of_triangles(T)
+    assert cs.area() == pytest.approx(1000.0)
+    assert conn.inscribed_radius(cs) == pytest.approx(5.0, abs=0.03)
+    assert conn.section_of_triangles(np.zeros((0, 3, 2))).is_empty()
+    assert conn.inscribed_radius(m3.CrossSection()) == 0.0
+
+
+def test_place_centres_near_the_two_ends():
+    strip = m3.CrossSection([np.array([[0, 0], [100, 0], [100, 10], [0, 10]], dtype=float)])
+    r, c = 2.0, 0.2
+    cands = conn.place_centres(strip, r, c)
+    assert len(cands) == 2
+    need = r + c + conn.WALL_MIN
+    a, b = sorted((cand[0] for cand in cands), key=lambda p: p[0])
+    assert need <= a[0] < need + 1.0 and 100 - need - 1.0 < b[0] <= 100 - need  # close to the ends
+    for p in (a, b):
+        assert need - 1e-6 <= p[1] <= 10 - need + 1e-6
+    short = m3.CrossSection([np.array([[0, 0], [12, 0], [12, 10], [0, 10]], dtype=float)])
+    assert len(conn.place_centres(short, r, c)) == 1  # too short for two holes and a wall between
+    narrow = m3.CrossSection([np.array([[0, 0], [100, 0], [100, 7], [0, 7]], dtype=float)])
+    assert conn.place_centres(narrow, r, c) == []  # 7 mm < 2 (2 + 0.2 + 1.5)
+
+
+def test_cylinder_geometry():
+    axis = np.array([1.0, 2.0, 2.0]) / 3.0
+    C = conn.cylinder([1.0, 2.0, 3.0], axis, 2.5, -1.0, 4.0)
+    assert C.volume() == pytest.approx(conn.polygon_area(2.5) * 5.0, rel=1e-9)
+    V, _ = from_manifold(C)
+    s = (V - [1.0, 2.0, 3.0]) @ axis
+    assert s.min() == pytest.approx(-1.0) and s.max() == pytest.approx(4.0)
+    radial = np.linalg.norm((V - [1.0, 2.0, 3.0]) - np.outer(s, axis), axis=1)
+    np.testing.assert_allclose(radial, 2.5, rtol=1e-9)
