@@ -2,35 +2,43 @@
 
 Each joint (the planar common face of two neighbouring parts, `solid_parts.split_solid`)
 gets cylinders "on two sides close to the edge of the connected surfaces": near the two
-ends of the joint face, axis along the plane normal.  The seed puts "two connectors into
-one segment, one convex and the other concave", so the first connector is a peg on the
-joint's first part and a hole in its second, the second one the other way round: every
-part of a joint carries one peg and one hole (the parts cannot be put together the wrong
-way round) and both pegs push in along the same axis.  All volume work is manifold3d
-(cylinders, union, difference); the placement is 2D work on the joint face as a
+ends of the joint face.  The seed puts "two connectors into one segment, one convex and
+the other concave", so the first connector is a peg on the joint's first part and a hole
+in its second, the second one the other way round: every part of a joint carries one peg
+and one hole (the parts cannot be put together the wrong way round) and both pegs are
+parallel, so the parts slide together along one axis.  All volume work is manifold3d
+(cylinders, union, difference, clipping); the placement is 2D work on the joint face as a
 ``manifold3d.CrossSection`` (its inward offset is the set of admissible peg centres).
 
-Sizes (the one place for them, below): the joint's thickness ``w`` is the diameter of
-the largest circle inside the joint face (for a cut straight across a shell of thickness
-t it is t, more where the plane meets the shell obliquely).
+Sizes (the one place for them, below), from the wall thickness t at the joint (the
+shell's own thickness there: the joint face is wider where the plane meets the shell
+obliquely):
 
-* peg diameter 40 % of ``w``, at least 2 mm: a peg under 2 mm breaks off or prints as a
-  blob on a 0.4 mm nozzle; 40 % leaves 30 % of the wall on either side of the peg;
-* hole radius = peg radius + clearance (default 0.2 mm, a usual press-free fit for FDM);
-* at least 1.5 mm of material around the hole (three to four 0.4 mm perimeters), so the
-  peg centre must lie ``peg radius + clearance + 1.5 mm`` inside the joint face:
-  ``w >= 2 (r + c + 1.5)`` (5.4 mm for a 2 mm peg with 0.2 mm clearance; a 10 mm shell
-  gets 4 mm pegs);
+* peg diameter 40 % of t, at least 2 mm: a peg under 2 mm breaks off or prints as a blob
+  on a 0.4 mm nozzle; 40 % leaves 30 % of the wall on either side of the peg;
+* hole radius = peg radius + clearance (default 0.2 mm, a free, not press, fit for FDM);
+* at least 1.5 mm of material around the hole (three to four 0.4 mm perimeters):
+  ``t >= 2 (r + c + 1.5)``, 5.4 mm for a 2 mm peg with 0.2 mm clearance (a 10 mm bolus
+  gets 4 mm pegs; a thinner wall is left plain with a warning);
 * peg length 1.5 x its diameter, at least 3 mm (enough to register the parts; a longer
   peg runs out of a curved shell); hole depth = peg length + clearance;
-* the peg is made 1 mm longer into its own part (EMBED) so the union overlaps instead of
-  touching (no coplanar faces in the boolean); that part of it lies inside the part and
-  adds no volume.
+* the cylinders reach back EMBED = 1 mm behind the joint plane into the peg's own part
+  (more for a tilted axis, `embed_length`), so the union overlaps instead of touching;
+  that length lies inside the part and adds no volume.
 
-Checks, with manifold volumes: the peg's anchor (the EMBED length) lies inside its part,
-the peg adds exactly the volume of its protruding length, and the hole widened by the
-1.5 mm wall (and deepened by it) lies inside the hole's part (also clear of holes placed
-before).  A connector failing them is tried at half length, then dropped with a note.
+Placement: the axis is the plane normal (square to the joint face), else the normal
+tilted into the shell's tangent (`joint_axes`, up to MAX_TILT_DEG).  Where the plane
+meets the shell obliquely a hole centred in the wall at the plane drifts across the wall
+as it goes deeper, so `fit_in_wall` moves each centre across the joint strip (from the
+local wall: inner face, outer face) and shortens the peg until the hole with its walls
+stays in the middle of the wall.
+
+Checks, with manifold volumes on the parts clipped around the connector: the peg's base
+lies inside its part, the peg adds exactly the volume of its protruding length, and the
+hole widened by the 1.5 mm wall (and deepened by it) lies inside the other part, clear of
+the connectors placed before.  A site failing them is tried a little to either side and
+shorter, then the next site inward along the joint; a connector with no site left is
+dropped with a note.
 """
 from __future__ import annotations
 
