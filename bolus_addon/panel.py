@@ -50,11 +50,12 @@ def draw_pattern_table(layout, t: dict) -> None:
 
 
 def draw_saliency(box, s, obj):
-    row = box.row(align=True)
+    row = box.row(align=True)  # the treatment area around the 3D cursor (select_area), before the analysis
     row.prop(s, "area_radius_mm", text="Radius (mm)")
-    row.prop(s, "exclude_cavities", text="No cavities")
+    row.prop(s, "exclude_cavities")
     op = box.operator("bolus.select_area", icon="PIVOT_CURSOR")
     op.radius_mm, op.exclude_cavities = s.area_radius_mm, s.exclude_cavities
+    box.separator()
     box.label(text="1. Where it cannot lie flat", icon="SHADING_SOLID")
     box.prop(s, "smoothing_mm", text="Smoothing (mm)")
     box.prop(s, "color_by")
