@@ -55,7 +55,6 @@ def draw_saliency(box, s, obj):
     row.prop(s, "exclude_cavities")
     op = box.operator("bolus.select_area", icon="PIVOT_CURSOR")
     op.radius_mm, op.exclude_cavities = s.area_radius_mm, s.exclude_cavities
-    box.separator()
     box.label(text="1. Where it cannot lie flat", icon="SHADING_SOLID")
     box.prop(s, "smoothing_mm", text="Smoothing (mm)")
     box.prop(s, "color_by")
