@@ -269,51 +269,62 @@ def _fit(surf: _Surface, p, n0, up, text, height, depth, taken=()):
     r = np.cross(up, n0)
     lo, hi = _text_box(text)
     lo, hi = lo * height, hi * height
-    centre = 0.5 * (lo + hi)
     margin = max(MARGIN_MM, MARGIN_REL * height)
     half = 0.5 * (hi - lo) + margin
+    size = f"{hi[0] - lo[0]:.1f} x {hi[1] - lo[1]:.1f} mm with a {margin:.1f} mm margin"
+    # the box and its margin, sampled every `step` mm in the tangent plane, seen along n0
     step = min(0.5, height / 8.0)
     xs = np.linspace(-half[0], half[0], int(np.ceil(2 * half[0] / step)) + 1)
     ys = np.linspace(-half[1], half[1], int(np.ceil(2 * half[1] / step)) + 1)
     gx, gy = (g.ravel() for g in np.meshgrid(xs, ys, indexing="ij"))
-    Q = p + gx[:, None] * r + gy[:, None] * up
     reach = float(np.hypot(*half)) + 2.0  # the face tilts at most MAX_TILT_DEG < 45 degrees
-    face, X, bary = surf.project(p, n0, Q, reach)
+    face, X, bary = surf.project(p, n0, p + gx[:, None] * r + gy[:, None] * up, reach)
+    problem = _coverage_problem(surf, face, n0)
+    if problem is None:
+        # heights along n0 must run on without a jump (else a fold or an overhang hides the face)
+        H = ((X - p) @ n0).reshape(len(xs), len(ys))
+        jump = max(np.abs(np.diff(H, axis=0)).max(initial=0.0), np.abs(np.diff(H, axis=1)).max(initial=0.0))
+        if jump > step * np.tan(np.radians(MAX_TILT_DEG)) * 1.5 + 0.05:
+            problem = f"the face under it is partly hidden by a fold or an overhang (a step of {jump:.1f} mm)"
+        elif len(taken) and np.min(cKDTree(np.concatenate(taken)).query(X)[0]) < step:
+            problem = "it would overlap text placed before"
+    if problem is not None:
+        raise _NoFit(f"the text's box ({size}) does not fit: {problem}")
+    inner = (np.abs(gx) <= half[0] - margin + 1e-9) & (np.abs(gy) <= half[1] - margin + 1e-9)
+    _check_wall(surf, face[inner], bary[inner], X[inner], depth)
+    return _Spot(p=p, r=r, u=up, n=n0, height=height, centre=0.5 * (lo + hi), footprint=X, reach=reach)
+
+
+def _coverage_problem(surf: _Surface, face, n0):
+    """None when every sample (faces (k,), -1 for none) lies on the outer face tilted at most
+    MAX_TILT_DEG from n0, else what is wrong (shares of the samples)."""
     hit = face >= 0
     fside = np.where(hit, surf.side[np.maximum(face, 0)], -1)
     tilt_ok = np.where(hit, surf.fn[np.maximum(face, 0)] @ n0, -1.0) >= np.cos(np.radians(MAX_TILT_DEG))
-    good = hit & (fside == SIDE_OUTER) & tilt_ok
-    size = f"{hi[0] - lo[0]:.1f} x {hi[1] - lo[1]:.1f} mm with a {margin:.1f} mm margin"
-    if not good.all():
-        off = 100.0 * np.mean(~hit | ((fside != SIDE_OUTER) & (fside >= 0)))
-        steep = 100.0 * np.mean(hit & (fside == SIDE_OUTER) & ~tilt_ok)
-        parts = []
-        if off > 0:
-            named = sorted({SIDE_NAMES.get(int(s), str(s)) for s in np.unique(fside[hit & (fside != SIDE_OUTER)])})
-            where = " or ".join(["beyond the solid"] * bool(np.any(~hit)) + [f"over {s} faces" for s in named])
-            parts.append(f"{_percent(off)} of it lies off the outer face ({where})")
-        if steep > 0:
-            parts.append(f"{_percent(steep)} of it lies where the face tilts more than {MAX_TILT_DEG:.0f} degrees")
-        raise _NoFit(f"the text's box ({size}) does not fit: " + "; ".join(parts))
-    # heights along n0 must run on without a jump (else a fold or an overhang hides the face)
-    H = ((X - p) @ n0).reshape(len(xs), len(ys))
-    jump = max(np.abs(np.diff(H, axis=0)).max(initial=0.0), np.abs(np.diff(H, axis=1)).max(initial=0.0))
-    if jump > step * np.tan(np.radians(MAX_TILT_DEG)) * 1.5 + 0.05:
-        raise _NoFit(f"the text's box ({size}) does not fit: the face under it is partly hidden by a fold "
-                     f"or an overhang (a step of {jump:.1f} mm)")
-    if len(taken) and np.min(cKDTree(np.concatenate(taken)).query(X)[0]) < step:
-        raise _NoFit(f"the text's box ({size}) would overlap text placed before")
-    # the wall under the letters (the box without the margin), on a coarser grid
-    inner = (np.abs(gx) <= half[0] - margin + 1e-9) & (np.abs(gy) <= half[1] - margin + 1e-9)
-    pick = np.nonzero(inner)[0]
-    pick = pick[:: max(1, len(pick) // 400)]
+    if np.all(hit & (fside == SIDE_OUTER) & tilt_ok):
+        return None
+    off = 100.0 * np.mean(~hit | (fside != SIDE_OUTER))
+    steep = 100.0 * np.mean(hit & (fside == SIDE_OUTER) & ~tilt_ok)
+    parts = []
+    if off > 0:
+        named = sorted({SIDE_NAMES.get(int(x), str(x)) for x in np.unique(fside[hit & (fside != SIDE_OUTER)])})
+        where = " or ".join(["past its edge"] * bool(np.any(~hit)) + [f"over {x} faces" for x in named])
+        parts.append(f"{_percent(off)} of it lies off the outer face ({where})")
+    if steep > 0:
+        parts.append(f"{_percent(steep)} of it lies where the face tilts more than {MAX_TILT_DEG:.0f} degrees")
+    return "; ".join(parts)
+
+
+def _check_wall(surf: _Surface, face, bary, X, depth):
+    """Raise _NoFit when the wall under the surface points X (k,3) (on faces / bary) is thinner than
+    WALL_FACTOR x depth (ray casts inward along the smooth normal, at most 400 of them)."""
+    pick = np.arange(0, len(X), max(1, len(X) // 400))
     N, _ = surf.normal_at(face[pick], bary[pick])
     wall = ray_thickness(surf.V, surf.F, X[pick], -N, max_mm=WALL_FACTOR * depth * 4, manifold=surf.M)
     if len(wall) and wall.min() < WALL_FACTOR * depth:
         i = int(np.argmin(wall))
         raise _NoFit(f"the wall under the text is only {wall[i]:.2f} mm thick at ({_xyz(X[pick][i])}) mm "
                      f"(at least {WALL_FACTOR:g} x the depth = {WALL_FACTOR * depth:.2f} mm is needed)")
-    return _Spot(p=p, r=r, u=up, n=n0, height=height, centre=centre, footprint=X, reach=reach)
 
 
 def _percent(x) -> str:
