@@ -7,7 +7,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 CORE = ROOT / "bolus_addon" / "core"
 FORBIDDEN = {"bpy", "bmesh", "mathutils", "gpu", "bl_math", "bpy_extras"}
-ALLOWED_THIRD_PARTY = {"numpy", "scipy", "sklearn"}
+ALLOWED_THIRD_PARTY = {"numpy", "scipy", "sklearn", "manifold3d"}  # manifold3d: the volume library of issue 11
 
 
 def imported_top_modules(path: Path) -> set[str]:

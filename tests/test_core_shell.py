@@ -1,0 +1,224 @@
+"""core.shell: the bolus solid on a skin region (issue 11 point 1).  bpy-free; coarse
+resolutions (1.5-2 mm) keep the file fast -- speed figures live in bench/."""
+import math
+
+import numpy as np
+import pytest
+
+from bolus_addon.core.distance_field import SkinDistance
+from bolus_addon.core.errors import BolusError
+from bolus_addon.core.shell import check_shell_request, make_shell
+from bolus_addon.core.solid import SIDE_INNER, SIDE_OUTER, SIDE_RIM, closed_report, ray_thickness, to_manifold
+from meshgen import degenerate_variants, grid, grid_with_holes, height_field, icosphere, ring_surface
+
+
+def hemisphere(R=60.0, nlat=24, na=72, inward=False):
+    """Open hemisphere z >= 0 of radius R (rim at z = 0), normals outward (or inward)."""
+    th = np.linspace(np.pi / 2, 0, nlat + 1)[:-1]
+    V, F, _ = ring_surface(np.stack([R * np.sin(th), R * np.cos(th)], 1), na=na, pole=True)
+    V[-1] = [0.0, 0.0, R]
+    return (V, F[:, ::-1].copy()) if inward else (V, F)
+
+
+def sockets_face(n=40, size=120.0):
+    """Synthetic face: a 22 mm nose ridge and two 9 mm deep eye sockets on a gently curved sheet
+    (normals +z, away from the 'body')."""
+    def z(x, y):
+        nose = 22.0 * np.exp(-((x / 9.0) ** 2 + ((y + 5) / 22.0) ** 2))
+        eyes = -9.0 * (np.exp(-(((x - 30) / 11.0) ** 2 + ((y - 22) / 9.0) ** 2))
+                       + np.exp(-(((x + 30) / 11.0) ** 2 + ((y - 22) / 9.0) ** 2)))
+        return nose + eyes - 0.004 * (x ** 2 + y ** 2)
+    return height_field(z, n, n, size)
+
+
+@pytest.fixture(scope="module")
+def cap_shell():
+    V, F = hemisphere()
+    return V, F, make_shell(V, F, 10.0, 0.0, 2.0)
+
+
+def test_cap_closed_manifold_genus0(cap_shell):
+    _, _, sh = cap_shell
+    rep = closed_report(sh.V, sh.F)
+    assert rep["closed"] and rep["components"] == 1 and rep["genus"] == 0
+    to_manifold(sh.V, sh.F)  # manifold3d accepts it as is
+    assert rep["volume_mm3"] == pytest.approx(sh.volume_mm3, rel=1e-9) and sh.volume_mm3 > 0
+    assert sh.holes == 0 and sh.side.dtype == np.int8 and len(sh.side) == len(sh.F)
+    assert set(np.unique(sh.side)) == {SIDE_INNER, SIDE_OUTER, SIDE_RIM}
+
+
+def test_cap_volume_within_one_percent(cap_shell):
+    _, _, sh = cap_shell
+    exact = 2.0 / 3.0 * math.pi * (70.0 ** 3 - 60.0 ** 3)
+    assert abs(sh.volume_mm3 / exact - 1) < 0.01
+
+
+def only_on(sh, side):
+    """Vertices all of whose faces are of this side (not on the edge to another side)."""
+    other = np.zeros(len(sh.V), dtype=bool)
+    other[sh.F[sh.side != side].ravel()] = True
+    return np.setdiff1d(np.unique(sh.F[sh.side == side]), np.nonzero(other)[0])
+
+
+def test_cap_inner_face_on_the_skin_and_outer_at_thickness(cap_shell):
+    V, F, sh = cap_shell
+    r = np.linalg.norm(sh.V, axis=1)
+    inner = only_on(sh, SIDE_INNER)
+    outer = only_on(sh, SIDE_OUTER)
+    skin = SkinDistance(V, F)
+    d_in = skin.nearest(sh.V[inner])[0]
+    assert d_in.max() <= sh.resolution / 2
+    away = sh.V[outer][:, 2] > 2 * sh.resolution
+    assert np.abs(r[outer][away] - 70.0).max() < 0.1 * sh.resolution + 0.1
+    # the rim is the annulus swept by the border normals (the faceted cap's border normals
+    # tilt up by half a ring step, 1.9 degrees: z <= 10 tan(1.9 deg) = 0.33, plus the voxel rounding)
+    rim = only_on(sh, SIDE_RIM)
+    assert np.abs(sh.V[rim][:, 2]).max() < 0.33 + sh.resolution / 2
+
+
+def test_cap_ray_thickness_within_5_percent(cap_shell):
+    _, _, sh = cap_shell
+    assert 9.5 <= sh.thickness_min <= sh.thickness_mean <= sh.thickness_max <= 10.5
+    # independent rays: from the cap (away from the rim), radially outward
+    rng = np.random.default_rng(1)
+    u = rng.normal(size=(300, 3))
+    u[:, 2] = np.abs(u[:, 2]) + 0.6
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    d = ray_thickness(sh.V, sh.F, 60.0 * u, u, 40.0)
+    assert np.all(np.abs(d - 10.0) < 0.5)
+
+
+def test_bowl_no_fold_no_thin_spot():
+    """Concave side of a sphere (R 30, t 10): a normal push would fold; the true-distance shell
+    stays closed and at least 0.95 t thick along the inner face's normals."""
+    V, F = hemisphere(30.0, nlat=16, na=48, inward=True)
+    sh = make_shell(V, F, 10.0, 0.0, 1.5)
+    rep = closed_report(sh.V, sh.F)
+    assert rep["closed"] and rep["components"] == 1 and rep["genus"] == 0
+    assert sh.thickness_min >= 0.95 * 10.0
+    # inner face of the bowl's shell is the sphere, outer face the sphere of radius 20
+    outer = np.unique(sh.F[sh.side == SIDE_OUTER])
+    r = np.linalg.norm(sh.V[outer], axis=1)
+    assert np.median(np.abs(r - 20.0)) < 0.1
+
+
+def test_sockets_face_no_self_intersection_no_thin_spot():
+    V, F = sockets_face()
+    sh = make_shell(V, F, 10.0, 0.0, 2.0)
+    rep = closed_report(sh.V, sh.F)
+    assert rep["closed"] and rep["components"] == 1 and rep["genus"] == 0
+    assert sh.thickness_min >= 0.95 * 10.0
+    # a self-intersecting solid has points of its outer face closer than t to the skin: none here
+    skin = SkinDistance(V, F)
+    d, foot, _, _ = skin.nearest(sh.V[only_on(sh, SIDE_OUTER)])
+    away = skin.rim_tree.query(foot)[0] > sh.resolution  # the rim corner is rounded by a voxel
+    assert np.abs(d[away] - 10.0).max() < 0.1 * sh.resolution
+
+
+def test_hole_kept_open():
+    V, F = grid_with_holes(12, 12, 120.0, holes=((4, 4, 8, 8),))  # 40 x 40 mm hole in the middle
+    sh = make_shell(V, F, 8.0, 0.0, 2.0)
+    rep = closed_report(sh.V, sh.F)
+    assert sh.holes == 1 and rep["closed"] and rep["components"] == 1 and rep["genus"] == 1
+    d = ray_thickness(sh.V, sh.F, [[60.0, 60.0, -5.0], [20.0, 20.0, -5.0]], [[0, 0, 1.0], [0, 0, 1.0]], 30.0)
+    assert np.isinf(d[0])                      # straight through the hole
+    assert d[1] == pytest.approx(5.0, abs=0.2)  # into the material next to it
+
+
+def test_narrow_curved_hole_cut_through():
+    """A hole of 2 x 20 mm (narrower than the 4 mm the level set resolves at 2 mm voxels) in a
+    curved sheet: the cutter still opens it, and a warning names it."""
+    V, F = grid_with_holes(60, 12, 120.0, holes=((29, 4, 30, 6),))
+    V[:, 2] = -0.004 * ((V[:, 0] - 60) ** 2 + (V[:, 1] - 60) ** 2)
+    sh = make_shell(V, F, 8.0, 0.0, 2.0)
+    rep = closed_report(sh.V, sh.F)
+    assert rep["closed"] and rep["genus"] == 1
+    assert any("hole 1" in w for w in sh.warnings)
+    z = -0.004 * (1.0 ** 2 + 10.0 ** 2)
+    assert np.isinf(ray_thickness(sh.V, sh.F, [[59.0, 50.0, z - 3]], [[0, 0, 1.0]], 30.0))[0]
+
+
+def test_clearance_moves_the_inner_face_out():
+    V, F = grid(6, 6, 60.0)
+    sh = make_shell(V, F, 8.0, 2.0, 1.5)
+    inner = np.unique(sh.F[sh.side == SIDE_INNER])
+    outer = np.unique(sh.F[sh.side == SIDE_OUTER])
+    mid = lambda ix: ix[np.all((sh.V[ix, :2] > 5) & (sh.V[ix, :2] < 55), axis=1)]
+    np.testing.assert_allclose(sh.V[mid(inner), 2], 2.0, atol=1e-6)
+    np.testing.assert_allclose(sh.V[mid(outer), 2], 8.0, atol=1e-6)
+    assert sh.thickness_mean == pytest.approx(6.0, abs=0.05)
+    assert sh.volume_mm3 == pytest.approx(60 * 60 * 6.0, rel=0.01)
+
+
+def test_others_collision_names_the_spot():
+    V, F = hemisphere(30.0, nlat=12, na=36)
+    # the rest of the skin: a sheet 5 mm above the pole, inside the 10 mm shell
+    Vo, Fo = grid(4, 4, 20.0)
+    Vo = Vo + [-10.0, -10.0, 35.0]
+    with pytest.raises(BolusError, match=r"run into the rest of the skin near \(.*\) mm"):
+        make_shell(V, F, 10.0, 0.0, 2.0, others=(Vo, Fo))
+    # 15 mm above: no collision
+    sh = make_shell(V, F, 10.0, 0.0, 2.0, others=(Vo + [0, 0, 10.0], Fo))
+    assert closed_report(sh.V, sh.F)["closed"]
+
+
+@pytest.mark.parametrize("t, c, res, says", [
+    (0.0, 0.0, 0.5, "thickness must be above 0"),
+    (-3.0, 0.0, 0.5, "thickness must be above 0"),
+    (60.0, 0.0, 0.5, "above 50 mm: choose"),
+    (float("nan"), 0.0, 0.5, "finite"),
+    (10.0, -1.0, 0.5, "clearance must be 0 mm or more"),
+    (10.0, 10.0, 0.5, "clearance 10 mm must be smaller than the thickness"),
+    (10.0, 0.0, 0.0, "resolution must be above 0 mm"),
+    (10.0, 0.0, 3.0, "too coarse .* choose a resolution of 2.5 mm or finer"),
+    (5.0, 3.0, 1.0, "too coarse for a wall of 2 mm .* 0.5 mm or finer"),
+    ("a", 0.0, 0.5, "must be a number"),
+])
+def test_bad_request(t, c, res, says):
+    with pytest.raises(BolusError, match=says):
+        check_shell_request(t, c, res)
+    with pytest.raises(BolusError, match=says):
+        make_shell(*grid(2, 2, 10.0), t, c, res)
+
+
+def test_no_area_closed_and_flipped_regions():
+    with pytest.raises(BolusError, match="no area"):
+        check_shell_request(10.0, 0.0, 0.5, area_mm2=0.0)
+    with pytest.raises(BolusError, match="closed surface"):
+        make_shell(*icosphere(2, 40.0), 5.0, 0.0, 1.0)
+    V, F = grid(4, 4, 40.0)
+    F[3] = F[3, ::-1]
+    with pytest.raises(BolusError, match="not consistently oriented.*Recalculate"):
+        make_shell(V, F, 5.0, 0.0, 1.0)
+    with pytest.raises(BolusError, match="0 triangle"):
+        make_shell(np.zeros((0, 3)), np.zeros((0, 3), dtype=int), 5.0, 0.0, 1.0)
+
+
+def test_too_many_grid_points_refused_with_a_choice():
+    V, F = grid(2, 2, 2000.0)
+    with pytest.raises(BolusError, match=r"million grid points.*choose a resolution of [0-9.]+ mm or coarser"):
+        make_shell(V, F, 10.0, 0.0, 0.5)
+
+
+BASE = height_field(lambda x, y: 0.002 * (x ** 2 + y ** 2), nx=6, ny=6, size=50.0)
+
+
+@pytest.mark.parametrize("name", sorted(degenerate_variants(*BASE)))
+def test_degenerate_input(name):
+    V, F, says = degenerate_variants(*BASE)[name]
+    if says is None:  # the needle: sound, a closed solid
+        sh = make_shell(V, F, 5.0, 0.0, 1.25)
+        rep = closed_report(sh.V, sh.F)
+        assert rep["closed"] and np.isfinite(sh.V).all() and sh.volume_mm3 > 0
+        return
+    with pytest.raises(BolusError, match=says):
+        make_shell(V, F, 5.0, 0.0, 1.25)
+
+
+def test_progress_reports_stages():
+    seen = []
+    make_shell(*grid(4, 4, 40.0), 5.0, 0.0, 1.25, progress=lambda f, s: seen.append((f, s)))
+    fr = [f for f, _ in seen]
+    assert fr == sorted(fr) and fr[0] == 0.0 and fr[-1] == 1.0
+    texts = {s for _, s in seen}
+    assert {"distance field", "level set", "checks"} <= texts
