@@ -223,6 +223,24 @@ def test_degenerate_meshes():
                     closest_point_on_mesh(V2, F2, centre)
 
 
+def test_defects_far_from_the_area_do_not_matter():
+    """A zero-area triangle and a non-manifold fin 50 mm away from a 10 mm area: computed as without them;
+    the same defects near the cursor are refused naming the mesh's own vertex indices."""
+    V, F = plane(30, 120.0, 0.0)
+    far = int(np.argmin(np.linalg.norm(V[F].mean(axis=1) - [50.0, 0.0, 0.0], axis=1)))  # interior, x ~ 50 mm
+    a, b, c = (int(x) for x in F[far])
+    n = len(V)
+    V2 = np.vstack([V, V[a][None], V[a] + [0.0, 0.0, 4.0]])
+    F2 = np.vstack([F, [[a, b, n]], [[a, b, n + 1]]])  # zero-area (coincident), and a third face on edge a-b
+    ref = treatment_area(V, F, [-20.0, 0.0, 0.0], 10.0)
+    got = treatment_area(V2, F2, [-20.0, 0.0, 0.0], 10.0)
+    assert got.area_mm2 == pytest.approx(ref.area_mm2, rel=1e-12)
+    with pytest.raises(BolusError, match=f"zero-area.*vertices {a}, {b}, {n}"):
+        treatment_area(V2, F2, V[a] + [-2.0, 0.0, 0.0], 10.0)
+    with pytest.raises(BolusError, match="non-manifold edge"):
+        treatment_area(V2, np.vstack([F, [[a, b, n + 1]]]), V[a] + [-2.0, 0.0, 0.0], 10.0)
+
+
 def test_openness_of_zero_area_and_needle_triangles_is_sound():
     V, F = plane(12, 60.0, 0.0)
     for name in ("coincident", "collinear", "needle"):

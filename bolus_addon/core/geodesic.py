@@ -85,6 +85,7 @@ def closest_point_on_mesh(V: np.ndarray, F: np.ndarray, p) -> tuple[np.ndarray, 
         raise BolusError("the surface has no triangles")
     Q = _closest_on_triangles(p, V[F])
     d2 = ((Q - p) ** 2).sum(1)
+    d2[~np.isfinite(d2)] = np.inf  # a zero-area triangle (no closest point of its own)
     f = int(np.argmin(d2))
     return Q[f], f, float(np.sqrt(d2[f]))
 

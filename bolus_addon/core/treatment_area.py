@@ -34,7 +34,7 @@ from .cutting import boundary_loops
 from .errors import BolusError
 from .geodesic import barycentric, closest_point_on_mesh, geodesic_distance
 from .levelset_cut import CutFailed, CutState, cut_band
-from .topology import MeshTopology, check_mesh, face_areas
+from .topology import MeshTopology, as_mesh_arrays, check_mesh, face_areas, submesh
 from .visibility import DEFAULT_DIRECTIONS, openness
 
 __all__ = ["Area", "treatment_area", "cavity_faces", "geodesic_distance", "OPENNESS_THRESHOLD"]
@@ -163,8 +163,9 @@ def treatment_area(V, F, centre, radius_mm: float = 45.0, exclude_cavities: bool
 
     Parameters
     ----------
-    V : (n,3) mm; F : (m,3) the surface (refused: NaN/inf, zero-area triangles,
-    non-manifold edges: `check_mesh`); centre : (3,) mm; radius_mm > 0;
+    V : (n,3) mm; F : (m,3) the surface (refused: NaN/inf anywhere; zero-area triangles
+    and non-manifold edges within reach of the area, farther ones do not matter);
+    centre : (3,) mm; radius_mm > 0;
     exclude_cavities : leave out faces less open than ``openness_threshold``;
     max_cursor_mm : the farthest the centre may be from the surface (default radius_mm);
     progress : callable(fraction, text) or None.
@@ -178,7 +179,9 @@ def treatment_area(V, F, centre, radius_mm: float = 45.0, exclude_cavities: bool
     c = np.asarray(centre, dtype=np.float64).reshape(-1)
     if c.shape != (3,) or not np.isfinite(c).all():
         raise BolusError(f"the centre must be a finite 3D point, got {centre}")
-    V, F = check_mesh(V, F, "the surface", manifold=True)
+    V, F = as_mesh_arrays(V, F)  # shapes, indices, NaN/inf anywhere
+    if len(F) == 0:
+        raise BolusError("the surface has no triangles")
     report = progress if progress is not None else (lambda f, t: None)
     report(0.0, "nearest surface point")
     p, f0, how_far = closest_point_on_mesh(V, F, c)
@@ -188,9 +191,7 @@ def treatment_area(V, F, centre, radius_mm: float = 45.0, exclude_cavities: bool
             f"the centre (3D cursor) is {how_far:.1f} mm from the nearest point of the surface, farther than "
             f"{limit:g} mm: place the cursor on the skin (Shift+right-click on the surface) and try again")
     report(0.05, "distance along the surface")
-    longest = float(np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2).max())
-    reach = max(OCCLUDER_REACH * radius if exclude_cavities else radius, radius + 2.0 * longest)
-    d = geodesic_distance(V, F, p, f0, max_mm=reach)  # exact up to the reach: faces across d = r all have finite d
+    d = _distance_near(V, F, p, f0, radius, OCCLUDER_REACH * radius if exclude_cavities else radius)
     # 1. the outer border: d = radius
     finite = np.isfinite(d)
     dom = finite[F].all(axis=1)
@@ -226,6 +227,35 @@ def treatment_area(V, F, centre, radius_mm: float = 45.0, exclude_cavities: bool
         area.warnings.append(f"the whole connected surface lies within {radius:g} mm of the cursor: nothing was cut "
                              "at the radius")
     return area
+
+
+def _distance_near(V, F, p, f0, radius, base_reach) -> np.ndarray:
+    """Distance along the surface (n,) from p on triangle f0, up to the reach (inf beyond).
+
+    Only the triangles within the reach of p (straight-line distance, which never exceeds
+    the distance along the surface) are used and checked (zero-area triangles, non-manifold
+    edges: refused there, with the mesh's vertex indices); a defect far away does not matter.
+    The reach is base_reach, and at least the radius plus two of the longest edges there, so
+    every face the level line d = radius crosses has all its corners' distances."""
+    dist_v = np.linalg.norm(V - p, axis=1)
+    near = (dist_v[F].min(axis=1) <= base_reach)
+    near[f0] = True
+    longest = float(np.linalg.norm(V[F[near]] - V[np.roll(F[near], 1, axis=1)], axis=2).max())
+    reach = max(base_reach, radius + 2.0 * longest)
+    near = (dist_v[F].min(axis=1) <= reach)
+    near[f0] = True
+    Fb, ids = submesh(F, near)
+    topo = MeshTopology(V[ids], Fb)
+    topo.require_nondegenerate("the surface near the cursor", vert_ids=ids)
+    bad = np.nonzero(topo.nonmanifold_edges)[0]
+    if len(bad):
+        i, j = (int(ids[x]) for x in topo.edges[bad[0]])
+        raise BolusError(f"the surface near the cursor has {len(bad)} non-manifold edge(s) (shared by more than two "
+                         f"triangles), e.g. the edge between vertices {i} and {j}; Select > Select All by Trait > "
+                         "Non Manifold shows them")
+    d = np.full(len(V), np.inf)
+    d[ids] = geodesic_distance(V[ids], Fb, p, int(np.count_nonzero(near[:f0])), max_mm=reach)
+    return d
 
 
 def _finish(V, F, st, inside, cav, d, p, f0, how_far, radius) -> Area:
