@@ -260,7 +260,7 @@ def thin_warnings(shell, wall: float) -> list[str]:
     """A warning when the measured wall is thinner than THIN_FRACTION of the one asked (``wall`` mm)."""
     if not np.isfinite(shell.thickness_min) or shell.thickness_min >= THIN_FRACTION * wall:
         return []
-    if any("thin" in w for w in shell.warnings):  # the core already named the spot
+    if any(f"{shell.thickness_min:.2f} mm" in w for w in shell.warnings):  # the core already named the spot
         return []
     return [f"thin spot: the wall measures {shell.thickness_min:.2f} mm at its thinnest, under "
             f"{THIN_FRACTION * 100:.0f} % of the {wall:g} mm asked (mean {shell.thickness_mean:.2f} mm); "

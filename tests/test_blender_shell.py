@@ -363,3 +363,16 @@ def test_failure_after_the_core_leaves_nothing(bpy_addon, scene, monkeypatch, ex
     assert_same_object(before, object_snapshot(ob))
     if existing:
         assert_same_object(old, object_snapshot(bpy.data.objects["dome_bolus"]))
+
+
+def test_thin_spot_warned_once(bpy_addon):
+    """A wall under 95 % of the one asked is warned: by the core with its spot, else here with the figures."""
+    from types import SimpleNamespace
+
+    shell_ops = __import__("sys").modules["bolus.bolus_addon.shell_ops"]
+    thin = dict(thickness_min=5.5, thickness_mean=5.98, warnings=[])
+    assert shell_ops.thin_warnings(SimpleNamespace(**{**thin, "thickness_min": 5.71}), 6.0) == []  # 95.2 %
+    (w,) = shell_ops.thin_warnings(SimpleNamespace(**thin), 6.0)
+    assert "5.50 mm at its thinnest, under 95 % of the 6 mm asked (mean 5.98 mm)" in w
+    core = "the wall is only 5.50 mm thick near (1.0, 2.0, 3.0) mm (thickness 6 mm asked)"
+    assert shell_ops.thin_warnings(SimpleNamespace(**{**thin, "warnings": [core]}), 6.0) == []
