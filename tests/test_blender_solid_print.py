@@ -244,3 +244,24 @@ def test_nose_bolus_into_parts(bpy_addon, scene, capfd):
         assert closed_and_consistent(Tp)[0], f"nose part {p} is not closed"
         total += signed_volume(Vp, Tp) * 1000.0
     assert total == pytest.approx(vol, rel=0.005)
+
+
+def test_remaking_the_bolus_drops_its_old_parts(bpy_addon, scene):
+    """print_segment from Edit Mode on the bolus (the user stays there), orient, then Make Bolus
+    again on the skin: the out-of-date part objects and tables go, nothing piles up."""
+    bpy = bpy_addon
+    ob, bolus = make_bolus(bpy, small=True)
+    names = datablock_names(bpy)
+    bpy.ops.object.mode_set(mode="EDIT")
+    assert bpy.ops.bolus.print_segment(parts=2) == {"FINISHED"}
+    assert bolus.mode == "EDIT"
+    bpy.ops.object.mode_set(mode="OBJECT")
+    assert "bolus_print_part" in bolus.data.attributes and "bolus_connectors" in bolus
+    assert bpy.ops.bolus.orient_parts() == {"FINISHED"}
+    assert "dome_bolus_part_1" in bpy.data.objects
+    bpy.context.view_layer.objects.active = ob
+    assert bpy.ops.bolus.make_shell(thickness_mm=4.0, resolution_mm=RES_CAP) == {"FINISHED"}
+    assert datablock_names(bpy) == names
+    bolus = bpy.data.objects["dome_bolus"]
+    assert "bolus_print_part" not in bolus.data.attributes
+    assert not {"bolus_connectors", "bolus_print_table", "bolus_orient_table"} & set(bolus.keys())
