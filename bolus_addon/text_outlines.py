@@ -66,10 +66,9 @@ def _outline_polygons(V: np.ndarray, F: np.ndarray) -> list[np.ndarray]:
     F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 2] != F[:, 0])]
     if len(F) == 0:
         return []
-    T = V[F]
-    signed = (T[:, 1, 0] - T[:, 0, 0]) * (T[:, 2, 1] - T[:, 0, 1]) - (T[:, 2, 0] - T[:, 0, 0]) * (T[:, 1, 1] - T[:, 0, 1])
-    if signed.sum() < 0:  # triangles facing -z: turn them so outer loops run counter-clockwise
-        F = F[:, ::-1]
+    e1, e2 = V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
+    if np.sum(e1[:, 0] * e2[:, 1] - e2[:, 0] * e1[:, 1]) < 0:
+        F = F[:, ::-1]  # triangles facing -z: turn them so that outer loops run counter-clockwise
     return [V[loop] for loop in boundary_loops(F) if len(loop) >= 3]
 
 

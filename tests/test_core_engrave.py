@@ -13,7 +13,8 @@ DEPTH = 0.6
 #: an "L" (bar on the left, foot to the right): mirrored text shows the foot on the left
 GLYPH_L = [np.array([[0, 0], [0.7, 0], [0.7, 0.2], [0.2, 0.2], [0.2, 1], [0, 1]], float)]
 #: an "O" with its hole (clockwise)
-GLYPH_O = [np.array([[0, 0], [0.8, 0], [0.8, 1], [0, 1]], float), np.array([[0.2, 0.2], [0.2, 0.8], [0.6, 0.8], [0.6, 0.2]], float)]
+GLYPH_O = [np.array([[0, 0], [0.8, 0], [0.8, 1], [0, 1]], float),
+           np.array([[0.2, 0.2], [0.2, 0.8], [0.6, 0.8], [0.6, 0.2]], float)]
 AREA_L = 0.7 * 0.2 + 0.2 * 0.8
 AREA_O = 0.8 - 0.4 * 0.6
 
@@ -56,7 +57,8 @@ def radial_sides(V, F, centre_axis):
 
 
 def cylinder_shell(R=60.0, r=50.0, length=80.0, seg=256):
-    M = (m3.Manifold.cylinder(length, R, R, seg) - m3.Manifold.cylinder(length, r, r, seg)).trim_by_plane((0, 1, 0), 0.0)
+    M = m3.Manifold.cylinder(length, R, R, seg) - m3.Manifold.cylinder(length, r, r, seg)
+    M = M.trim_by_plane((0, 1, 0), 0.0)
     V, F = from_manifold(M)
     return V, F, radial_sides(V, F, lambda C: C * [1, 1, 0] / np.hypot(C[:, 0], C[:, 1])[:, None])
 
@@ -365,3 +367,11 @@ def test_long_label_turns_along_a_narrow_strip():
     assert np.ptp(mid[:, 1]) > 20.0 and np.ptp(mid[:, 0]) < 10.0
     removed = volume(V, F) - volume(V2, F2)
     assert removed >= 2 * (AREA_L + AREA_O) * LABEL_HEIGHTS[-1] ** 2 * DEPTH * 0.9
+
+
+def test_no_outer_face_nothing_engraved():
+    V, F, side = slab()
+    side = np.full_like(side, SIDE_RIM)
+    V2, F2, s2, warnings = engrave_labels(V, F, side, {"A": LO, "L": LO, "R": LO}, "A", (1.0, 0.0, 0.0))
+    assert any("'A' not engraved" in w and "no spot on the outer face" in w for w in warnings)
+    assert np.array_equal(V2, V) and np.array_equal(F2, F) and np.array_equal(s2, side)

@@ -561,7 +561,8 @@ def engrave_labels(V, F, side, outlines: dict, label: str, left, *, part_labels=
     for i in range(k):
         Fl, vid = submesh(F, parts == i)
         if len(Fl):
-            surfs[i] = _Surface(V[vid], Fl, side[parts == i], what=f"part {i}" if part_labels is not None else "the solid")
+            what = f"part {i}" if part_labels is not None else "the solid"
+            surfs[i] = _Surface(V[vid], Fl, side[parts == i], what=what)
     ends = _marker_parts(surfs, left)
     warnings, pieces = [], []
     progress = progress or (lambda f, t: None)
