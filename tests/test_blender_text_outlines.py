@@ -90,3 +90,29 @@ def test_font_outlines_engrave_a_closed_solid(scene):
     area = sum(_signed_area(p) for p in out.polygons) * 36.0  # holes count negative
     removed = closed_report(V, F)["volume_mm3"] - closed_report(V2, F2)["volume_mm3"]
     assert removed == pytest.approx(area * 0.6, rel=0.10)
+
+
+def test_from_edit_mode_of_another_object(scene):
+    """make_shell engraves while the source may be in Edit Mode: the outline is the same and the
+    user's object stays in Edit Mode with its selection."""
+    from bolus.bolus_addon.text_outlines import text_outline  # noqa: PLC0415
+    from conftest import enter_edit_mode_with_faces, make_object  # noqa: PLC0415
+    from meshgen import grid  # noqa: PLC0415
+
+    import bpy  # noqa: PLC0415
+
+    V, F = grid(4, 4, 10.0)
+    ob = make_object(bpy, V, F, name="skin")
+    mask = np.zeros(len(F), dtype=bool)
+    mask[:5] = True
+    enter_edit_mode_with_faces(bpy, ob, mask)
+    before = _counts(bpy)
+    out = text_outline("Q7 edit")  # a string not cached by the other tests
+    assert _counts(bpy) == before
+    assert ob.mode == "EDIT" and bpy.context.view_layer.objects.active == ob
+    ob.update_from_editmode()
+    sel = np.zeros(len(ob.data.polygons), dtype=bool)
+    ob.data.polygons.foreach_get("select", sel)
+    assert np.array_equal(sel, mask)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    assert len(out.polygons) >= 4 and out.width > 3.0
