@@ -19,6 +19,12 @@ A spot is used only when the text's box plus a margin lies entirely on the outer
 and the wall under the letters is at least twice the depth (ray casts); otherwise the
 solid comes back unchanged with a note giving the figures.  The x stretch of the letters
 on a curved face is at most 1 / cos(tilt) (the outline is projected along n0).
+
+Placement.  Spots are points sampled every SPOT_SPACING_MM on the outer face.  A label goes to
+the spot farthest from the rim / cut / connector faces (then the nearest to the middle), a marker
+to the spot farthest towards the patient's left ("L") or right ("R") that still has room; up to
+MAX_TRIES spots, spread over the face, are tried.  `engrave_labels` tries LABEL_HEIGHTS and,
+for the label, the text turned along the direction the face is longest in around the spot.
 """
 from __future__ import annotations
 
