@@ -65,7 +65,7 @@ __all__ = ["Connector", "Joint", "SolidParts", "skin_neighbours", "svm_plane", "
 SVM_C = 1e3  #: LinearSVC's C on unit-RMS coordinates: close to the hard margin of eq. 6-38
 MAX_SVM_POINTS = 5000  #: per class; larger parts are subsampled (rng)
 MAX_EXTRA_PLANES = 4  #: separating planes added for cells of two parts in one arrangement region
-MIN_JOINT_AREA = 1.0  #: mm^2: two parts touching on less of a plane have no joint (a corner)
+MIN_JOINT_AREA = 1.0  #: mm^2: a pair touching on less than this gets no connector and no warning (a corner)
 WRONG_SIDE_WARN = 0.05  #: warn when a joint plane leaves more than 5 % of the two parts' skin vertices on the wrong side
 CRUMB_MM3 = 1.0  #: separate pieces of the solid smaller than this are left out (with a warning)
 ON_PLANE_TOL = 1e-6  #: mm: a face with all corners this close to a plane lies on it
@@ -601,7 +601,7 @@ def _joints(part_M, planes, plane_of_id) -> list[Joint]:
             for p in sorted(set(secs[a]) & set(secs[b])):
                 inter = secs[a][p][0] ^ secs[b][p][0]
                 area = float(inter.area())
-                if area < MIN_JOINT_AREA:
+                if area < MIN_CONTACT_AREA:
                     continue
                 sgn = 1.0 if secs[a][p][1] @ planes[p, :3] > 0 else -1.0  # a's outward normal points to b
                 J = Joint((a, b), sgn * planes[p, :3].copy(), float(sgn * planes[p, 3]), area, plane=int(p))
@@ -609,7 +609,10 @@ def _joints(part_M, planes, plane_of_id) -> list[Joint]:
                 joints.append(J)
     for J in joints:  # a pair touching on several planes: its largest face carries the connectors
         main = max((K for K in joints if K.parts == J.parts), key=lambda K: K.area_mm2)
-        if J is not main:
+        if J is main and J.area_mm2 < MIN_JOINT_AREA:
+            J.note = f"the parts touch on only {J.area_mm2:.2g} mm² here: no connector"
+            J.__dict__.pop("_section", None)
+        elif J is not main:
             J.note = (f"a second, {J.area_mm2:.0f} mm² face of parts {J.parts[0]} and {J.parts[1]} on another plane: "
                       "their main joint carries the connectors")
             J.__dict__.pop("_section", None)
