@@ -375,3 +375,25 @@ def test_no_outer_face_nothing_engraved():
     V2, F2, s2, warnings = engrave_labels(V, F, side, {"A": LO, "L": LO, "R": LO}, "A", (1.0, 0.0, 0.0))
     assert any("'A' not engraved" in w and "no spot on the outer face" in w for w in warnings)
     assert np.array_equal(V2, V) and np.array_equal(F2, F) and np.array_equal(s2, side)
+
+
+def test_a_spoiling_text_is_left_out_and_the_others_kept(monkeypatch):
+    """When the cut of one text comes out wrong (here: the "R" marker's solid replaced by a block
+    through the whole slab), that text is reported and the others are still engraved."""
+    import bolus_addon.core.engrave as engrave  # noqa: PLC0415
+
+    real = engrave._bent_prism
+
+    def bent(surf, spot, text_, depth):
+        if text_ is outlines["R"]:
+            return m3.Manifold.cube((4.0, 4.0, 20.0)).translate(tuple(spot.p - [2.0, 2.0, 10.0])), 1.0
+        return real(surf, spot, text_, depth)
+
+    monkeypatch.setattr(engrave, "_bent_prism", bent)
+    V, F, side = slab((90.0, 50.0, 8.0))
+    outlines = {"AB": LO, "L": TextOutline(GLYPH_L, 0.7), "R": text(GLYPH_O)}
+    V2, F2, s2, warnings = engrave_labels(V, F, side, outlines, "AB", (1.0, 0.0, 0.0))
+    assert len(warnings) == 1 and warnings[0].startswith("'R' not engraved: the engraving came out wrong")
+    assert closed_report(V2, F2)["genus"] == 0
+    h = LABEL_HEIGHTS[0]
+    assert volume(V, F) - volume(V2, F2) == pytest.approx((AREA_LO + AREA_L) * h * h * DEPTH, rel=0.10)

@@ -635,7 +635,7 @@ def _marker_parts(surfs, left):
 
 def _engrave_part(surf: _Surface, outlines, items, left, up, depth):
     """Place every (string, kind) of ``items`` on one part and cut them: (V, F, side, notes)."""
-    taken, prisms, notes, expected = [], [], [], 0.0
+    taken, placed, notes = [], [], []
     for s, kind in items:
         text = outlines[s]
         clearance = _clearance(surf, taken)
@@ -662,12 +662,22 @@ def _engrave_part(surf: _Surface, outlines, items, left, up, depth):
             notes.append(f"'{s}' not engraved: {note} ({also})")
             continue
         taken.append(spot.footprint)
-        prisms.append(prism)
-        expected += vol
-    if not prisms:
+        placed.append((s, prism, vol))
+    if not placed:
         return surf.V, surf.F, surf.side, notes
     try:
-        V, F, side = _subtract(surf, prisms, expected)
-    except _NoFit as e:
-        return surf.V, surf.F, surf.side, notes + [f"nothing engraved: {e}"]
-    return V, F, side, notes
+        return (*_subtract(surf, [p for _, p, _ in placed], sum(v for _, _, v in placed)), notes)
+    except _NoFit:  # find the text that spoils it: keep the others
+        good = []
+        for s, prism, vol in placed:
+            try:
+                _subtract(surf, [prism], vol)
+                good.append((prism, vol))
+            except _NoFit as e:
+                notes.append(f"'{s}' not engraved: {e}")
+        try:
+            if good:
+                return (*_subtract(surf, [p for p, _ in good], sum(v for _, v in good)), notes)
+        except _NoFit as e:
+            notes.append(f"nothing engraved: {e}")
+        return surf.V, surf.F, surf.side, notes
