@@ -315,6 +315,18 @@ def test_a_too_thin_joint_stays_plain():
     assert (res.side == SIDE_CONNECTOR).sum() == 0
 
 
+def test_three_parts_on_the_c_shell_with_two_planes_crossing_twice():
+    V, F, side = c_shell()
+    sV, sF = c_skin()
+    res = split_solid(V, F, side, sV, sF, angle_labels(sV, sF, [120.0, 230.0]))
+    assert_closed_parts(res, 3)
+    assert res.plain_volumes_mm3.sum() == pytest.approx(res.solid_volume_mm3, rel=1e-9)
+    np.testing.assert_allclose(res.plain_volumes_mm3 / res.solid_volume_mm3, np.array([120, 110, 110]) / 340,
+                               atol=0.02)
+    assert sorted(J.parts for J in main_joints(res)) == [(0, 1), (1, 2)]
+    assert all(len(J.connectors) == 2 for J in main_joints(res))
+
+
 def test_plane_crossing_the_shell_twice_still_gives_connected_parts():
     V, F, side = c_shell()
     sV, sF = c_skin()
