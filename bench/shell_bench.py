@@ -32,9 +32,10 @@ of one call do not depend on what ran before, and the peak memory is the child's
   with ``nonmanifold_thickness_mode`` 'EVEN' (the issue's "even thickness") and
   'CONSTRAINTS' (Blender's default), evaluated through the depsgraph (only the
   evaluation is timed);
-* time (wall clock of the call alone), peak memory (the child's VmHWM, reset just before
-  the call, minus its RSS before the call: manifold3d allocates in C++, which tracemalloc
-  does not see).
+* time (wall clock of the call alone), CPU time (all the child's threads during the call:
+  it depends less than the wall clock on what else runs on a shared machine), peak memory
+  (the child's VmHWM, reset just before the call, minus its RSS before the call: manifold3d
+  allocates in C++, which tracemalloc does not see).
 
 Then, measured here the same way for both (``measure_solid``):
 
@@ -44,7 +45,8 @@ Then, measured here the same way for both (``measure_solid``):
   from the region's border (boundary loops, holes included), a ray along the skin's
   vertex normal (eq. 3-2) to the first hit on the OUTER face (ours: faces with
   ``side == SIDE_OUTER``; Solidify: its offset layer), Blender's ``BVHTree.ray_cast``,
-  up to ``RAY_MAX`` x the thickness ("miss" beyond);
+  up to ``RAY_MAX`` x the thickness ("miss" beyond; a missed ray that meets a rim or hole
+  wall, e.g. a nostril's channel, is counted with the distance to that wall);
 * self-intersecting face pairs: ``BVHTree.overlap`` of the solid with itself, pairs that
   share a vertex left out (coplanar overlaps are not found by it);
 * folded triangles (Solidify only): offset-layer triangles whose normal turned against
@@ -52,7 +54,7 @@ Then, measured here the same way for both (``measure_solid``):
   the source face index).
 
 Parts (when ``core.solid_parts.split_solid`` is there, else a printed note): the
-0.5 mm shell (1.0 with ``--quick``) is split into 3 parts along the ABcut print
+region's finest shell is split into 3 parts along the ABcut print
 segmentation of its skin (``print_segment(skin, 3, rng=0)``) with peg/hole connectors
 (clearance 0.2 mm): the time of ``split_solid``, each part closed?, the parts' volumes
 against the shell's, and the total support volume (SPEC) of the parts, each in its best
@@ -90,7 +92,7 @@ PARTS = 3
 PARTS_CLEARANCE_MM = 0.2
 RAY_MAX = 3.0  # rays longer than RAY_MAX * thickness count as missing the outer face
 BORDER_STEP_MM = 0.25  # border edges are sampled this finely for the distance to the border
-WORKER_TIMEOUT_S = 600
+WORKER_TIMEOUT_S = 1800
 SPOTS = 3  # self-intersections: where the first few are (JSON)
 #: (key, nonmanifold_thickness_mode)
 SOLIDIFY_MODES = (("Solidify even", "EVEN"), ("Solidify constraints", "CONSTRAINTS"))
@@ -206,12 +208,14 @@ def border_distance(V, F):
     return cKDTree(np.vstack(pts)).query(V)[0]
 
 
-def ray_thickness(skin_V, skin_F, outer_V, outer_F, thickness: float) -> dict:
+def ray_thickness(skin_V, skin_F, outer_V, outer_F, thickness: float, walls_F=None) -> dict:
     """SPEC thickness: rays from the skin vertices farther than `thickness` from the border, along the skin's
     vertex normals, to the first hit on the outer face (outer_V (k,3), outer_F (j,3)); BVHTree ray casts.
 
     Returns rays, missed (no hit within RAY_MAX * thickness), min / mean / max over the hits (mm), thin (hits
-    below 0.95 t) and the (rays,) distances (inf where missed)."""
+    below 0.95 t) and the (rays,) distances (inf where missed); with ``walls_F`` (i,3) (the rim and hole walls,
+    on outer_V) also on_wall: the missed rays that meet a wall within the reach (they leave the solid through a
+    wall, e.g. a nostril's channel, before any outer face) and wall_min, the shortest of those distances."""
     import numpy as np
     from mathutils import Vector
     from mathutils.bvhtree import BVHTree
@@ -229,7 +233,16 @@ def ray_thickness(skin_V, skin_F, outer_V, outer_F, thickness: float) -> dict:
             d[k] = hit[3]
     ok = np.isfinite(d)
     out = {"rays": int(len(d)), "missed": int((~ok).sum()), "thin": int((d[ok] < 0.95 * thickness).sum()),
-           "min": None, "mean": None, "max": None, "distances": d}
+           "min": None, "mean": None, "max": None, "on_wall": None, "wall_min": None, "distances": d}
+    if walls_F is not None:
+        dw = []
+        if (~ok).any() and len(walls_F):
+            wt = BVHTree.FromPolygons(outer_V.tolist(), np.asarray(walls_F).tolist(), all_triangles=True)
+            for p, n in zip(skin_V[far][~ok], N[far][~ok]):
+                hit = wt.ray_cast(Vector(p), Vector(n), reach)
+                if hit[0] is not None:
+                    dw.append(hit[3])
+        out.update(on_wall=len(dw), wall_min=float(min(dw)) if dw else None)
     if ok.any():
         out.update(min=float(d[ok].min()), mean=float(d[ok].mean()), max=float(d[ok].max()))
     return out
@@ -269,12 +282,13 @@ def folded_triangles(V, F, src, skin_V, skin_F) -> int:
     return int(folded_mask(V, F, src, skin_V, skin_F).sum())
 
 
-def measure_solid(V, F, outer, skin_V, skin_F, thickness: float) -> dict:
-    """The figures of one solid (V, F) with its outer faces (mask (m,) bool) on the skin (skin_V, skin_F)."""
+def measure_solid(V, F, outer, walls, skin_V, skin_F, thickness: float) -> dict:
+    """The figures of one solid (V, F) with its outer faces and its rim / hole walls (masks (m,) bool) on the skin
+    (skin_V, skin_F)."""
     from bolus_addon.core.solid import closed_report
 
     rep = closed_report(V, F)
-    t = ray_thickness(skin_V, skin_F, V, F[outer], thickness)
+    t = ray_thickness(skin_V, skin_F, V, F[outer], thickness, F[walls])
     t.pop("distances")
     pairs = intersecting_pairs(V, F)
     spots = V[F[pairs[:SPOTS, 0]]].mean(axis=1)
@@ -442,12 +456,13 @@ def worker(job_path: str) -> int:
     return 0
 
 
-def run_worker(kind: str, arrays: dict, tmp: Path, **settings) -> tuple[dict, dict]:
+def run_worker(kind: str, arrays: dict, tmp: Path, keep: bool = False, **settings) -> tuple[dict, dict]:
     """Run one job in a child process (this interpreter): (its arrays, its stats); RuntimeError with its output
-    when it fails."""
+    when it fails.  The job's files in ``tmp`` are removed afterwards unless ``keep``."""
     import numpy as np
 
-    tag = f"{kind}_{len(list(tmp.iterdir()))}"
+    label = "_".join(str(settings[k]) for k in ("region", "resolution", "mode") if k in settings)
+    tag = f"{len(list(tmp.glob('*.json'))):02d}_{kind}_{label}".replace(" ", "-").rstrip("_")
     inp, outp, jobp = tmp / f"{tag}_in.npz", tmp / f"{tag}_out.npz", tmp / f"{tag}.json"
     np.savez(inp, **arrays)
     jobp.write_text(json.dumps({"kind": kind, "input": str(inp), "output": str(outp), **settings}))
@@ -462,8 +477,9 @@ def run_worker(kind: str, arrays: dict, tmp: Path, **settings) -> tuple[dict, di
     with np.load(outp) as z:
         out = {k: z[k] for k in z.files if k != "stats"}
         stats = json.loads(str(z["stats"]))
-    for f in (inp, outp, jobp):
-        f.unlink(missing_ok=True)
+    if not keep:
+        for f in (inp, outp, jobp):
+            f.unlink(missing_ok=True)
     return out, stats
 
 
@@ -479,11 +495,12 @@ def have(module: str, name: str) -> bool:
         return False
 
 
-def bench_region(region: dict, resolutions, tmp: Path) -> dict:
-    """Ours at each resolution (mm), both Solidify modes, then the parts of the finest shell (module doc)."""
+def bench_region(region: dict, resolutions, tmp: Path, keep: bool = False) -> dict:
+    """Ours at each resolution (mm), both Solidify modes, then the parts of the finest shell (module doc).
+    The child processes' input and output arrays stay in ``tmp`` when ``keep``."""
     import numpy as np
 
-    from bolus_addon.core.solid import SIDE_OUTER
+    from bolus_addon.core.solid import SIDE_OUTER, SIDE_RIM
 
     name, V, F = region["name"], region["V"], region["F"]
     t = THICKNESS_MM
@@ -494,8 +511,8 @@ def bench_region(region: dict, resolutions, tmp: Path) -> dict:
     for res in resolutions:
         key = f"ours {res:g} mm"
         try:
-            out, st = run_worker("ours", skin, tmp, thickness=t, resolution=res)
-            m = measure_solid(out["V"], out["F"], out["side"] == SIDE_OUTER, V, F, t)
+            out, st = run_worker("ours", skin, tmp, keep, region=name, thickness=t, resolution=res)
+            m = measure_solid(out["V"], out["F"], out["side"] == SIDE_OUTER, out["side"] == SIDE_RIM, V, F, t)
             shells[res] = out
             run = {"method": key, **st, **m, "folded": None}
         except Exception as exc:
@@ -504,9 +521,9 @@ def bench_region(region: dict, resolutions, tmp: Path) -> dict:
         print_run(run, t)
     for key, mode in SOLIDIFY_MODES:
         try:
-            out, st = run_worker("solidify", skin, tmp, thickness=t, mode=mode)
+            out, st = run_worker("solidify", skin, tmp, keep, region=name, thickness=t, mode=mode)
             off = out["layer"] == 1
-            m = measure_solid(out["V"], out["F"], off, V, F, t)
+            m = measure_solid(out["V"], out["F"], off, out["layer"] == 2, V, F, t)
             fm = folded_mask(out["V"], out["F"][off], out["src"][off], V, F)
             far = (border_distance(V, F)[F] > t).all(axis=1)  # source faces farther than t from the border
             m["folded"], m["folded_far"] = int(fm.sum()), int((fm & far[out["src"][off]]).sum())
@@ -529,7 +546,7 @@ def bench_region(region: dict, resolutions, tmp: Path) -> dict:
     sh = shells[res]
     try:
         out, st = run_worker("parts", {"V": sh["V"], "F": sh["F"], "side": sh["side"], "skin_V": V, "skin_F": F},
-                             tmp, parts=PARTS, clearance=PARTS_CLEARANCE_MM)
+                             tmp, keep, region=name, resolution=res, parts=PARTS, clearance=PARTS_CLEARANCE_MM)
         row["parts"] = {"resolution": res, **st, **parts_figures(out, sh)}
     except Exception as exc:
         row["parts"] = {"error": benchutil.error_row("parts", "parts", exc)["error"]}
@@ -570,6 +587,15 @@ def closed_text(rep: dict) -> str:
     return "no (" + ", ".join(bits) + " edges)" if bits else "no"
 
 
+def wall_text(th: dict, short: bool = False) -> str:
+    """The missed rays that leave through a rim or hole wall, and the shortest way to it ("" when none)."""
+    if not th.get("on_wall"):
+        return ""
+    if short:
+        return f" ({th['on_wall']} wall ≥ {th['wall_min']:.1f})"
+    return f": {th['on_wall']} of them leave through a rim or hole wall, after at least {th['wall_min']:.2f} mm"
+
+
 def cpu_text(r: dict) -> str:
     return _f(r.get("cpu_seconds"))
 
@@ -585,8 +611,8 @@ def print_run(r: dict, t: float) -> None:
     th = r["thickness"]
     print(f"   {r['method']}: {r['seconds']:.2f} s, peak +{mem_text(r)} MB, {r['triangles']} triangles, "
           f"closed {closed_text(r['closed'])}, volume {r['closed']['volume_mm3'] / 1000:.2f} cm³, thickness "
-          f"{_f(th['min'])} / {_f(th['mean'])} / {_f(th['max'])} mm on {th['rays']} rays ({th['missed']} missed, "
-          f"{th['thin']} below {0.95 * t:g} mm), {r['self_intersections']} self-intersecting pairs"
+          f"{_f(th['min'])} / {_f(th['mean'])} / {_f(th['max'])} mm on {th['rays']} rays ({th['thin']} below "
+          f"{0.95 * t:g} mm, {th['missed']} missed{wall_text(th)}), {r['self_intersections']} self-intersecting pairs"
           + (f", {r['folded']} folded of {r['offset_triangles']} offset triangles ({r['folded_far']} on skin "
              f"faces farther than {t:g} mm from the border)" if r.get("folded") is not None else ""))
     if r["self_intersections"]:
@@ -638,7 +664,7 @@ def shell_table(rows: list[dict], t: float) -> Table:
             tab.add(first, r["method"], f"{r['seconds']:.2f}", cpu_text(r), mem_text(r), r["triangles"],
                     closed_text(r["closed"]),
                     f"{r['closed']['volume_mm3'] / 1000:.2f}", _f(th["min"]), _f(th["mean"]), _f(th["max"]),
-                    f"{th['thin']} / {th['missed']} of {th['rays']}",
+                    f"{th['thin']} / {th['missed']}{wall_text(th, short=True)} of {th['rays']}",
                     "n/a" if r.get("folded") is None
                     else f"{r['folded']} ({r['folded_far']}) of {r['offset_triangles']}",
                     r["self_intersections"])
@@ -677,7 +703,8 @@ def legend() -> str:
             f"(SPEC, one measure for both): rays from the skin vertices farther than {THICKNESS_MM:g} mm from the "
             "region's border, along the skin's vertex normal, to the first hit on the outer face (ours: "
             "`SIDE_OUTER` faces; Solidify: its offset layer), `BVHTree.ray_cast`; missed = no hit within "
-            f"{RAY_MAX:g} t. Folded: offset-layer triangles whose normal turned against their source face's (in "
+            f"{RAY_MAX:g} t (in brackets: how many of those leave through a rim or hole wall, and the shortest way "
+            "there). Folded: offset-layer triangles whose normal turned against their source face's (in "
             f"brackets: those whose source face lies farther than {THICKNESS_MM:g} mm from the border). "
             "Self-intersecting pairs: `BVHTree.overlap` of the solid with itself, pairs sharing a vertex left out")
 
@@ -715,6 +742,7 @@ def main(argv=None) -> int:
     ap.add_argument("--worker", metavar="JOB", help=argparse.SUPPRESS)
     ap.add_argument("--resolution", metavar="MM", type=float, action="append", default=[],
                     help="run ours at this resolution on every region (repeatable; default: RESOLUTIONS)")
+    ap.add_argument("--keep", metavar="DIR", help="keep every call's input and output arrays (.npz) in DIR")
     ap.add_argument("--only", metavar="NAME", action="append", default=[],
                     help="bench only the regions whose name contains NAME (repeatable)")
     args = ap.parse_args(argv)
@@ -732,7 +760,10 @@ def main(argv=None) -> int:
     if args.only:
         names = [n for n in names if any(o in n for o in args.only)]
     rows = []
+    if args.keep:
+        Path(args.keep).mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="shell_bench_") as td:
+        work = Path(args.keep) if args.keep else Path(td)
         for name in names:
             try:
                 region = make_region(name)
@@ -740,7 +771,7 @@ def main(argv=None) -> int:
                 rows.append(benchutil.error_row("region", name, exc))
                 continue
             try:
-                rows.append(bench_region(region, resolutions_for(name, args), Path(td)))
+                rows.append(bench_region(region, resolutions_for(name, args), work, bool(args.keep)))
             except Exception as exc:
                 rows.append(benchutil.error_row("region", name, exc))
     total = time.perf_counter() - t_start

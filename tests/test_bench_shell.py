@@ -73,7 +73,11 @@ def test_ray_thickness_finds_a_thin_spot_and_a_miss(sb, bpy):
     far = np.linalg.norm(W[F].mean(axis=1)[:, :2] - [30.0, 30.0], axis=1) > 8.0  # a hole around (30, 30)
     r2 = sb.ray_thickness(V, F, W, F[far], T)
     assert r2["missed"] >= 1 and r2["rays"] == r["rays"]
-    assert np.isinf(r2["distances"]).sum() == r2["missed"]
+    assert np.isinf(r2["distances"]).sum() == r2["missed"] and r2["on_wall"] is None
+    # the faces cut out, given as a wall: every missed ray meets it, 10 mm up
+    r3 = sb.ray_thickness(V, F, W, F[far], T, walls_F=F[~far])
+    assert r3["on_wall"] == r3["missed"] == r2["missed"] and r3["wall_min"] == pytest.approx(T, abs=1e-4)
+    assert sb.ray_thickness(V, F, W, F, T, walls_F=F[~far])["on_wall"] == 0  # no miss, nothing to classify
 
 
 def test_border_distance_counts_hole_loops(sb):
@@ -115,7 +119,7 @@ def test_solidify_on_a_convex_cap(sb, bpy):
     assert (r["layer"] == 0).sum() == len(F) and (r["layer"] == 1).sum() == len(F)
     assert (r["src"][r["layer"] < 2] >= 0).all() and (r["src"][r["layer"] == 2] == -1).all()
     off = r["layer"] == 1
-    m = sb.measure_solid(r["V"], r["F"], off, V, F, T)
+    m = sb.measure_solid(r["V"], r["F"], off, r["layer"] == 2, V, F, T)
     assert m["closed"]["closed"] and m["self_intersections"] == 0
     assert m["closed"]["volume_mm3"] == pytest.approx(
         2 * np.pi / 3 * (70.0 ** 3 - 60.0 ** 3) * (1 - np.cos(np.radians(60))), rel=0.08)
@@ -136,7 +140,7 @@ def test_solidify_folds_in_a_tight_bowl(sb, bpy):
 
 
 def fake_rows():
-    th = {"rays": 100, "missed": 1, "thin": 2, "min": 9.5, "mean": 10.0, "max": 10.5}
+    th = {"rays": 100, "missed": 1, "thin": 2, "min": 9.5, "mean": 10.0, "max": 10.5, "on_wall": 1, "wall_min": 8.76}
     rep = {"closed": False, "boundary_edges": 3, "nonmanifold_edges": 0, "inconsistent_edges": 0,
            "volume_mm3": 12345.0}
     run = {"method": "ours 1 mm", "seconds": 1.0, "cpu_seconds": 1.5, "peak_mb": 300.0, "peak_delta_mb": 50.0,
@@ -157,7 +161,7 @@ def test_tables_keep_their_columns(sb):
     rows = fake_rows()
     md = sb.shell_table(rows, T).markdown().splitlines()
     assert len({line.count("|") for line in md}) == 1
-    assert "| no (3 boundary edges) |" in md[3] and "| 4 (1) of 8 |" in md[3] and "| 2 / 1 of 100 |" in md[2]
+    assert "| no (3 boundary edges) |" in md[3] and "| 4 (1) of 8 |" in md[3] and "| 2 / 1 (1 wall ≥ 8.8) of 100 |" in md[2]
     assert any("ERROR: E: no" in line for line in md) and any("ERROR: ValueError: bad" in line for line in md)
     pt = sb.parts_table(rows).markdown().splitlines()
     assert len({line.count("|") for line in pt}) == 1
