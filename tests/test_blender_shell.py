@@ -376,3 +376,29 @@ def test_thin_spot_warned_once(bpy_addon):
     assert "5.50 mm at its thinnest, under 95 % of the 6 mm asked (mean 5.98 mm)" in w
     core = "the wall is only 5.50 mm thick near (1.0, 2.0, 3.0) mm (thickness 6 mm asked)"
     assert shell_ops.thin_warnings(SimpleNamespace(**{**thin, "warnings": [core]}), 6.0) == []
+
+
+@pytest.mark.xfail(strict=True, reason="core.shell: the solid comes out of genus 3 (39 at 0.5 mm) instead of 1 "
+                   "on this band (see /work/notes/h11_h5_findings.md); remove this mark when fixed")
+def test_region_with_a_hole_keeps_it_open(bpy_addon, scene, capfd):
+    """A dome with its top cut away (a breathing hole): the bolus is one closed solid of genus 1
+    (Euler: V - E + F = 0) and the report counts the hole."""
+    bpy = bpy_addon
+    V, F = hemisphere_arrays(R=12.0, rings=12, na=48)
+    keep = V[F].mean(axis=1)[:, 2] < 12.0 * math.cos(math.radians(35.0))
+    used, inv = np.unique(F[keep], return_inverse=True)
+    ob = make_object(bpy, V[used], inv.reshape(-1, 3), name="dome", scale_length=0.001)
+    before = object_snapshot(ob)
+    reports(capfd)
+    assert bpy.ops.bolus.make_shell(thickness_mm=4.0, resolution_mm=RES_CAP) == {"FINISHED"}
+    out = reports(capfd)
+    bolus = bpy.data.objects["dome_bolus"]
+    Vb, T, _ = mesh_arrays(bolus.data)
+    assert closed_and_consistent(T)[0]
+    E = np.unique(np.sort(np.stack([T, np.roll(T, -1, axis=1)], axis=2).reshape(-1, 2), axis=1), axis=0)
+    assert len(np.unique(T)) - len(E) + len(T) == 0, "not one solid with one hole through it"
+    assert bolus["bolus_holes"] == 1 and "1 hole kept open" in out, out
+    # nothing of the solid above the hole's rim: the hole goes through
+    top = np.linalg.norm(Vb[:, :2], axis=1) < 12.0 * math.sin(math.radians(35.0)) - 2 * RES_CAP
+    assert not top.any()
+    assert_same_object(before, object_snapshot(ob))
