@@ -402,3 +402,26 @@ def test_region_with_a_hole_keeps_it_open(bpy_addon, scene, capfd):
     top = np.linalg.norm(Vb[:, :2], axis=1) < 12.0 * math.sin(math.radians(35.0)) - 2 * RES_CAP
     assert not top.any()
     assert_same_object(before, object_snapshot(ob))
+
+
+def test_transformed_source(bpy_addon, scene):
+    """The source is moved, turned and scaled: the bolus is built in world space (identity transform)."""
+    bpy = bpy_addon
+    ob = hemisphere(bpy, R=6.0, rings=12, na=48)
+    ob.location = (100.0, -20.0, 5.0)
+    ob.rotation_euler = (0.0, math.pi, 0.0)  # upside down: the dome's outside now faces -Z
+    ob.scale = (2.0, 2.0, 2.0)  # world radius 12 mm
+    bpy.context.view_layer.update()
+    assert bpy.ops.bolus.make_shell(thickness_mm=4.0, resolution_mm=RES_CAP) == {"FINISHED"}
+    bolus = bpy.data.objects["dome_bolus"]
+    np.testing.assert_array_equal(np.array(bolus.matrix_world), np.eye(4))
+    V, T, tp = mesh_arrays(bolus.data)
+    assert closed_and_consistent(T)[0]
+    side = face_attr(bolus.data, "bolus_shell_side")[tp]
+    P = V - [100.0, -20.0, 5.0]
+    away = P[:, 2] < -RES_CAP  # away from the rim (now at z = 5, the dome below it)
+    inner, outer = np.unique(T[side == 0]), np.unique(T[side == 1])
+    r = np.linalg.norm(P, axis=1)
+    assert np.abs(r[inner[away[inner]]] - 12.0).max() <= RES_CAP / 2 + 0.02
+    assert np.abs(r[outer[away[outer]]] - 16.0).max() <= RES_CAP / 2 + 0.02
+    assert signed_volume(V, T) == pytest.approx(analytic_volume(12.0, 4.0), rel=0.03)  # -1.7 %: 1 mm voxels on a small dome
