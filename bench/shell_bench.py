@@ -94,6 +94,7 @@ RAY_MAX = 3.0  # rays longer than RAY_MAX * thickness count as missing the outer
 BORDER_STEP_MM = 0.25  # border edges are sampled this finely for the distance to the border
 WORKER_TIMEOUT_S = 1800
 SPOTS = 3  # self-intersections: where the first few are (JSON)
+TARGET_S, TARGET_RES_MM = 30.0, 0.5  # issue 11: a 10 mm shell in under 30 s at 0.5 mm
 #: (key, nonmanifold_thickness_mode)
 SOLIDIFY_MODES = (("Solidify even", "EVEN"), ("Solidify constraints", "CONSTRAINTS"))
 REGIONS = ("example nose", "nefertiti face", "demosthenes face")
@@ -361,6 +362,10 @@ def solidify_arrays(bpy, V, F, mode: str, thickness: float = THICKNESS_MM, timer
     layer[is_tri & on_skin] = 0
     layer[is_tri & ~on_skin] = 1
     tsrc[layer == 2] = -1
+    counts = np.bincount(layer, minlength=3)
+    if counts[0] != len(F) or counts[1] != len(F):
+        stats["warnings"] = [f"the layers were not told apart cleanly: {counts[0]} skin-layer and {counts[1]} "
+                             f"offset-layer triangles for {len(F)} skin triangles"]
     bpy.data.objects.remove(ob)
     bpy.data.meshes.remove(me)
     return {"V": V2, "F": F2, "layer": layer, "src": tsrc, **stats}
@@ -691,6 +696,26 @@ def parts_table(rows: list[dict]) -> Table:
     return tab
 
 
+def target_lines(rows: list[dict]) -> list[str]:
+    """The issue's targets against the figures: time at 0.5 mm, closed without self-intersection, min thickness."""
+    runs = [(row["region"], r) for row in rows if "runs" in row for r in row["runs"] if "error" not in r]
+    fine = [(g, r) for g, r in runs if r["method"] == f"ours {TARGET_RES_MM:g} mm"]
+    out = []
+    if fine:
+        ok = sum(r["seconds"] < TARGET_S for _, r in fine)
+        out.append(f"make_shell under {TARGET_S:g} s at {TARGET_RES_MM:g} mm: {ok} of {len(fine)} regions ("
+                   + ", ".join(f"{g} {r['seconds']:.0f} s, cpu {r['cpu_seconds']:.0f} s" for g, r in fine) + ").")
+    for label, pick in (("ours", lambda m: m.startswith("ours")), ("Solidify", lambda m: m.startswith("Solidify"))):
+        sel = [r for _, r in runs if pick(r["method"])]
+        if not sel:
+            continue
+        sound = sum(r["closed"]["closed"] and r["self_intersections"] == 0 for r in sel)
+        thick = sum(r["thickness"]["min"] is not None and r["thickness"]["min"] >= 0.95 * THICKNESS_MM for r in sel)
+        out.append(f"{label}: closed without self-intersection in {sound} of {len(sel)} runs; minimum thickness >= "
+                   f"{0.95 * THICKNESS_MM:g} mm in {thick} of {len(sel)}.")
+    return out
+
+
 def legend() -> str:
     return (f"Shell {THICKNESS_MM:g} mm thick. Ours: `core.shell.make_shell(thickness={THICKNESS_MM:g}, "
             "resolution=r)` (r in the method column; the skin's other faces are not passed); the peer: Blender's "
@@ -720,7 +745,8 @@ def parts_legend() -> str:
 def markdown(rows: list[dict], argv) -> str:
     regions = "; ".join(f"**{r['region']}**: {r['how']}" for r in rows if "how" in r)
     out = ["## Printed bolus (`bench/shell_bench.py`)", "", benchutil.run_line("shell_bench.py", argv), "",
-           f"Regions: {regions}.", "", legend() + ".", "", shell_table(rows, THICKNESS_MM).markdown()]
+           f"Regions: {regions}.", "", legend() + ".", "", shell_table(rows, THICKNESS_MM).markdown(), "",
+           " ".join(target_lines(rows))]
     pt = parts_table(rows)
     if pt.rows:
         out += ["", parts_legend() + ".", "", pt.markdown()]
@@ -777,6 +803,7 @@ def main(argv=None) -> int:
     total = time.perf_counter() - t_start
     print("\n" + legend() + ".")
     print(shell_table(rows, THICKNESS_MM).text())
+    print("\n".join(target_lines(rows)))
     pt = parts_table(rows)
     if pt.rows:
         print("\n" + parts_legend() + ".")

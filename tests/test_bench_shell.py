@@ -170,6 +170,15 @@ def test_tables_keep_their_columns(sb):
     assert text.startswith("## Printed bolus") and "Σ volume / shell" in text
 
 
+def test_target_lines(sb):
+    rows = fake_rows()
+    rows[0]["runs"][0]["method"] = "ours 0.5 mm"
+    lines = sb.target_lines(rows)
+    assert lines[0].startswith("make_shell under 30 s at 0.5 mm: 1 of 1 regions (r 1 s, cpu 2 s)")
+    assert lines[1] == "ours: closed without self-intersection in 1 of 1 runs; minimum thickness >= 9.5 mm in 1 of 1."
+    assert lines[2].startswith("Solidify: closed without self-intersection in 0 of 1 runs")
+
+
 def test_resolutions_per_region(sb):
     ns = argparse.Namespace
     assert sb.resolutions_for("example nose", ns(resolution=[], quick=False)) == (0.5, 1.0)
