@@ -158,7 +158,8 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
         region, topo, warnings = self.read_region(context, allow_nonmanifold=False)
         check_shell_request(t, c, res, area_mm2=float(topo.areas.sum()))
         others = self._rest_of_skin(context, region)
-        shell = make_shell(region.V, region.F, t, c, res, others=others,
+        skin_F = _world_winding(region.obj, region.F)
+        shell = make_shell(region.V, skin_F, t, c, res, others=others,
                            progress=lambda f, text: self.progress(0.85 * f, text))
         V, F, side = shell.V, shell.F, np.asarray(shell.side)
         label = self.label.strip()
@@ -173,7 +174,7 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
             raise BolusError(f"internal error: the bolus came out open ({final['boundary_edges']} open edges, "
                              f"{final['nonmanifold_edges']} non-manifold): nothing was made")
         volume_cm3 = final["volume_mm3"] / 1000.0
-        obj = self._write(context, region, shell, V, F, side, label, density, volume_cm3)
+        obj = self._write(context, region, skin_F, shell, V, F, side, label, density, volume_cm3)
         warnings += list(shell.warnings)
         warnings += thin_warnings(shell, t - c)
         self.warn_all(warnings)
@@ -189,15 +190,15 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
         if not rest.any():
             return None
         other = mesh_io.read_region(context, region.obj, polys=rest)
-        return other.V, other.F
+        return other.V, _world_winding(other.obj, other.F)
 
-    def _write(self, context, region, shell, V, F, side, label, density, volume_cm3):
+    def _write(self, context, region, skin_F, shell, V, F, side, label, density, volume_cm3):
         """Create the meshes and the object (or refill ``<name>_bolus``); nothing is left if this fails."""
         src, scale = region.obj, region.mm_per_unit
         name = src.name + BOLUS_SUFFIX
         created = []
         try:
-            skin_me = tri_mesh(name + SKIN_SUFFIX, region.V / scale, region.F)
+            skin_me = tri_mesh(name + SKIN_SUFFIX, region.V / scale, skin_F)
             created.append(skin_me)
             solid_me = tri_mesh(name + SOLID_SUFFIX, shell.V / scale, shell.F)
             created.append(solid_me)
@@ -230,6 +231,13 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
         obj[PROP_SOLID_MESH] = solid_me.name
         obj[PROP_HOLES] = int(shell.holes)
         return obj
+
+
+def _world_winding(obj, F: np.ndarray) -> np.ndarray:
+    """Triangles F (m,3) wound so their normals point where Blender shows them in world space: a
+    mirroring transform (negative determinant) reverses the winding, and Blender flips the normals."""
+    M = np.array(obj.matrix_world, dtype=np.float64)[:3, :3]
+    return F[:, ::-1].copy() if np.linalg.det(M) < 0 else F
 
 
 def _link_bolus(context, src, name: str, me) -> bpy.types.Object:

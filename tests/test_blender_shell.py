@@ -404,13 +404,15 @@ def test_region_with_a_hole_keeps_it_open(bpy_addon, scene, capfd):
     assert_same_object(before, object_snapshot(ob))
 
 
-def test_transformed_source(bpy_addon, scene):
-    """The source is moved, turned and scaled: the bolus is built in world space (identity transform)."""
+@pytest.mark.parametrize("mirror", [1.0, -1.0], ids=["turned", "mirrored"])
+def test_transformed_source(bpy_addon, scene, mirror):
+    """The source is moved, turned and scaled (and mirrored: Blender then flips the normals, and so
+    must we): the bolus is built in world space (identity transform) on the side the normals show."""
     bpy = bpy_addon
     ob = hemisphere(bpy, R=6.0, rings=12, na=48)
     ob.location = (100.0, -20.0, 5.0)
     ob.rotation_euler = (0.0, math.pi, 0.0)  # upside down: the dome's outside now faces -Z
-    ob.scale = (2.0, 2.0, 2.0)  # world radius 12 mm
+    ob.scale = (2.0 * mirror, 2.0, 2.0)  # world radius 12 mm
     bpy.context.view_layer.update()
     assert bpy.ops.bolus.make_shell(thickness_mm=4.0, resolution_mm=RES_CAP) == {"FINISHED"}
     bolus = bpy.data.objects["dome_bolus"]
