@@ -48,7 +48,8 @@ Then, measured here the same way for both (``measure_solid``):
   up to ``RAY_MAX`` x the thickness ("miss" beyond; a missed ray that meets a rim or hole
   wall, e.g. a nostril's channel, is counted with the distance to that wall);
 * self-intersecting face pairs: ``BVHTree.overlap`` of the solid with itself, pairs that
-  share a vertex left out (coplanar overlaps are not found by it);
+  share a vertex (a position: twin vertices count as one) left out (coplanar overlaps are not
+  found by it);
 * folded triangles (Solidify only): offset-layer triangles whose normal turned against
   their source face's (n . n_source <= 0; the modifier copies a face attribute holding
   the source face index).
@@ -251,14 +252,17 @@ def ray_thickness(skin_V, skin_F, outer_V, outer_F, thickness: float, walls_F=No
 
 def intersecting_pairs(V, F):
     """(k,2) pairs i < j of triangles of (V, F) that intersect (BVHTree.overlap of the mesh with itself), leaving
-    out pairs that share a vertex (neighbours touch by construction)."""
+    out pairs that share a vertex (neighbours touch by construction), a vertex being a position: two indices
+    at exactly the same point count as one (manifold3d may keep such twins apart)."""
     import numpy as np
     from mathutils.bvhtree import BVHTree
 
-    tree = BVHTree.FromPolygons(np.asarray(V).tolist(), np.asarray(F).tolist(), all_triangles=True)
+    V, F = np.asarray(V), np.asarray(F)
+    tree = BVHTree.FromPolygons(V.tolist(), F.tolist(), all_triangles=True)
     pairs = np.array(tree.overlap(tree), dtype=np.int64).reshape(-1, 2)
     pairs = pairs[pairs[:, 0] < pairs[:, 1]]
-    a, b = F[pairs[:, 0]], F[pairs[:, 1]]
+    weld = np.unique(V, axis=0, return_inverse=True)[1].reshape(-1)[F]  # F on unique positions
+    a, b = weld[pairs[:, 0]], weld[pairs[:, 1]]
     return pairs[~(a[:, :, None] == b[:, None, :]).any(axis=(1, 2))]
 
 
@@ -731,7 +735,8 @@ def legend() -> str:
             f"{RAY_MAX:g} t (in brackets: how many of those leave through a rim or hole wall, and the shortest way "
             "there). Folded: offset-layer triangles whose normal turned against their source face's (in "
             f"brackets: those whose source face lies farther than {THICKNESS_MM:g} mm from the border). "
-            "Self-intersecting pairs: `BVHTree.overlap` of the solid with itself, pairs sharing a vertex left out")
+            "Self-intersecting pairs: `BVHTree.overlap` of the solid with itself, pairs sharing a vertex (a position) "
+            "left out")
 
 
 def parts_legend() -> str:

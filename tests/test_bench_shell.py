@@ -96,6 +96,13 @@ def test_self_intersections_counts_crossing_pairs_only(sb, bpy):
     V = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [2, 2, -5], [2, 2, 5], [12, 12, 0], [12, 10, 6]], float)
     F = np.array([[0, 1, 2], [3, 4, 5], [1, 6, 2]])  # 0 and 1 cross; 2 shares an edge with 0, crosses 1
     assert sb.self_intersections(V, F) == 2
+    # a triangle piercing another from a corner they share: neighbours, also when the corner is two twin indices
+    # (BVHTree.overlap reports this pair: the test fails without the twins welded)
+    W = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [4, 4, -3], [1, 6, 3], [0, 0, 0]], float)
+    assert sb.self_intersections(W, np.array([[0, 1, 2], [0, 3, 4]])) == 0
+    assert sb.self_intersections(W, np.array([[0, 1, 2], [5, 3, 4]])) == 0
+    W[5] = [-0.01, -0.01, 0.0]  # the twin moved off the corner: no longer a neighbour, and it pierces 0
+    assert sb.self_intersections(W, np.array([[0, 1, 2], [5, 3, 4]])) == 1
     Vs, Fs = meshgen.icosphere(2, 30.0)
     assert sb.self_intersections(Vs, Fs) == 0
     both = np.vstack([Vs, Vs + [20.0, 0, 0]]), np.vstack([Fs, Fs + len(Vs)])
