@@ -493,3 +493,15 @@ def test_cylinder_geometry():
     assert s.min() == pytest.approx(-1.0) and s.max() == pytest.approx(4.0)
     radial = np.linalg.norm((V - [1.0, 2.0, 3.0]) - np.outer(s, axis), axis=1)
     np.testing.assert_allclose(radial, 2.5, rtol=1e-9)
+
+
+def test_a_twisted_border_warns_that_the_plane_cannot_follow_it():
+    V, F = SKIN
+    C = V[F].mean(axis=1)
+    twisted = ((np.arctan2(C[:, 1], C[:, 0]) + np.pi * C[:, 2] / 60.0) % (2 * np.pi) < np.pi).astype(int)
+    res = split_solid(*CAP, V, F, twisted, connectors=False)
+    assert any(w.startswith("the joint plane between parts 0 and 1 leaves") and "far from straight" in w
+               for w in res.warnings)
+    assert_closed_parts(res, 2)  # still two closed parts, split by the best plane
+    straight = split_solid(*CAP, V, F, sectors(V, F, 2), connectors=False)
+    assert not any("far from straight" in w for w in straight.warnings)
