@@ -5,9 +5,11 @@ The shell is the set where
     f(x) = min( sd(x) - c,  t - sd(x),  r(x) )  > 0                                  (field)
 
 * ``sd`` is the signed distance to the skin triangles: the exact point-triangle distance
-  (Ericson's closest point, vectorised), the sign that of ``(x - foot) . n(foot)`` with n the
-  vertex normal interpolated barycentrically at the foot point (a pseudo-normal at edges and
-  vertices).  True distance, not a normal push: the offset surface {sd = t} cannot fold in
+  (Ericson's closest point, vectorised), the sign that of ``(x - foot) . n`` with n the
+  pseudo-normal of the foot's feature (Baerentzen & Aanaes 2005: the face normal inside a face,
+  the sum of the two face normals on an edge, the angle-weighted normal at a vertex), which is
+  the correct side wherever the skin is locally watertight (an interpolated vertex normal is
+  not: it flipped the sign at the folded mouth corners of the example face).  True distance, not a normal push: the offset surface {sd = t} cannot fold in
   concave spots (sides of the nose, eye sockets), where a per-vertex push self-intersects.
 * ``c`` the clearance (inner face), ``t`` the thickness (outer face), both from the skin.
 * ``r`` closes the rim: where the foot point lies ON a border edge or border vertex of the
@@ -28,7 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .cutting import boundary_loops
-from .topology import MeshTopology
+from .topology import MeshTopology, corner_angles
 
 __all__ = ["closest_on_triangles", "SkinDistance"]
 
@@ -111,6 +113,17 @@ class SkinDistance:
         ln[ln == 0] = 1.0
         self.vn = vn / ln[:, None]
         self.vtree = cKDTree(V)
+        # pseudo-normals for the sign (Baerentzen & Aanaes 2005): face normal inside a face, the
+        # sum of the two face normals on an edge, the angle-weighted normal at a vertex
+        ang = corner_angles(V, F)
+        van = np.zeros_like(V)
+        for j in range(3):
+            np.add.at(van, F[:, j], self.fn * ang[:, j:j + 1])
+        self.vn_angle = van
+        ef = topo.edge_faces[topo.face_edges]  # (m,3,2): faces on edge F[j] -> F[j+1]
+        other = np.where(ef[:, :, 0] == np.arange(len(F))[:, None], ef[:, :, 1], ef[:, :, 0])  # (m,3), -1 on border
+        en = self.fn[:, None, :] + np.where(other[:, :, None] >= 0, self.fn[np.maximum(other, 0)], 0.0)
+        self.edge_pn = np.stack([en[:, 1], en[:, 2], en[:, 0]], axis=1)  # (m,3,3): edge opposite corner j
         # border: per-face flag of the edge opposite corner j, per-vertex flag
         be = topo.boundary_edges[topo.face_edges]  # (m,3): edge F[j] -> F[j+1]
         self.fborder = np.stack([be[:, 1], be[:, 2], be[:, 0]], axis=1)  # opposite corner j
@@ -157,7 +170,8 @@ class SkinDistance:
         self.sub_pts = np.concatenate(pts)
         self.sub_owner = np.concatenate(owner)
         self.rmax = float(np.concatenate(radii).max())
-        self.tree = cKDTree(self.sub_pts)
+        self.tree = cKDTree(self.sub_pts, leafsize=32, balanced_tree=False, compact_nodes=False)
+        self.kd_eps = 0.0
 
     # ------------------------------------------------------------------ nearest
     def _best_of(self, X, cand, skip=None):
@@ -201,7 +215,7 @@ class SkinDistance:
         kk = min(k, len(self.sub_pts))
         for s in range(0, n, chunk):
             x = X[s:s + chunk]
-            _, ci = self.tree.query(x, k=kk, workers=2)
+            _, ci = self.tree.query(x, k=kk, eps=self.kd_eps, workers=2)
             cand = self.sub_owner[ci.reshape(len(x), -1)]
             # each owner once (sorted per row; repeats are skipped)
             cand = np.sort(cand, axis=1)
@@ -222,7 +236,15 @@ class SkinDistance:
         N /= ln[:, None]
         diff = X - Q
         h = np.einsum("ij,ij->i", diff, N)
-        sd = np.where(h >= 0, d, -d)
+        # sign from the pseudo-normal of the foot's feature (exact zeros / ones from Ericson)
+        PN = self.fn[FI].copy()
+        for j in range(3):
+            on_e = BC[:, j] == 0.0
+            PN[on_e] = self.edge_pn[FI[on_e], j]
+        for j in range(3):
+            on_v = BC[:, j] == 1.0
+            PN[on_v] = self.vn_angle[Fv[on_v, j]]
+        sd = np.where(np.einsum("ij,ij->i", diff, PN) >= 0, d, -d)
         eps = 1e-9
         on_rim = np.zeros(len(X), dtype=bool)
         for j in range(3):
