@@ -241,7 +241,8 @@ def _ring_radius(polys, tol=0.6):
     its corners, plus where the slice crosses the side's triangle diagonals), or None."""
     for P in polys:
         d = np.linalg.norm(P, axis=1)
-        if np.linalg.norm(P.mean(axis=0)) < tol and len(P) >= conn.SEGMENTS and d.min() >= d.max() * np.cos(np.pi / conn.SEGMENTS) - 1e-6:
+        regular = d.min() >= d.max() * np.cos(np.pi / conn.SEGMENTS) - 1e-6
+        if np.linalg.norm(P.mean(axis=0)) < tol and len(P) >= conn.SEGMENTS and regular:
             return float(d.max())
     return None
 

@@ -66,7 +66,7 @@ SVM_C = 1e3  #: LinearSVC's C on unit-RMS coordinates: close to the hard margin 
 MAX_SVM_POINTS = 5000  #: per class; larger parts are subsampled (rng)
 MAX_EXTRA_PLANES = 4  #: separating planes added for cells of two parts in one arrangement region
 MIN_JOINT_AREA = 1.0  #: mm^2: a pair touching on less than this gets no connector and no warning (a corner)
-WRONG_SIDE_WARN = 0.15  #: warn when a joint plane leaves more than 15 % of the two parts' skin vertices on the wrong side
+WRONG_SIDE_WARN = 0.15  #: warn when a joint plane leaves over 15 % of the two parts' skin vertices on the wrong side
 CRUMB_MM3 = 1.0  #: separate pieces of the solid smaller than this are left out (with a warning)
 ON_PLANE_TOL = 1e-6  #: mm: a face with all corners this close to a plane lies on it
 MIN_CONTACT_AREA = 1e-3  #: mm^2: cells sharing less plane face than this do not touch
@@ -197,7 +197,9 @@ def _faces(M: m3.Manifold):
     ri = np.asarray(mesh.run_index, dtype=np.int64) // 3
     ro = np.asarray(mesh.run_original_id, dtype=np.int64)
     oid = np.repeat(ro, np.diff(ri)) if len(ro) else np.zeros(len(F), dtype=np.int64)
-    fid = np.asarray(mesh.face_id, dtype=np.int64) if len(np.asarray(mesh.face_id)) == len(F) else np.zeros(len(F), np.int64)
+    fid = np.asarray(mesh.face_id, dtype=np.int64)
+    if len(fid) != len(F):
+        fid = np.zeros(len(F), np.int64)
     return V, F, oid, fid
 
 
