@@ -113,7 +113,9 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
     skin_side_up: skin_side_up_property()
 
     def run(self, context):
-        region, topo, warnings = self.read_region(context, allow_nonmanifold=True)
+        from . import solid_print_ops  # noqa: PLC0415 (it imports this module)
+
+        region, topo, warnings = solid_print_ops.read_parts_region(self, context)
         obj, me = region.obj, region.mesh
         if self.layer_mm <= 0:
             raise BolusError("the layer height must be positive")
@@ -126,8 +128,6 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
         tri_labels = poly_labels[region.tri_poly]
         if not (tri_labels >= 0).any():
             raise BolusError("none of the region's faces belongs to a print part: run Split into Print Parts first")
-        from . import solid_print_ops  # noqa: PLC0415 (it imports this module)
-
         plan = orient_print_parts(region.V, region.F, tri_labels, h=self.layer_mm, topo=topo,
                                   progress=lambda f, t: self.progress(0.9 * f, t),
                                   **solid_print_ops.orient_options(region, tri_labels, self.skin_side_up))

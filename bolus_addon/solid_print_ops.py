@@ -27,6 +27,7 @@ from .core.colormap import categorical_linear_rgba
 from .core.errors import BolusError
 from .core.print_segmentation import print_segmentation
 from .core.solid import SIDE_INNER, closed_report
+from .core.topology import MeshTopology
 from .shell_ops import (
     ATTR_SHELL_SIDE,
     PROP_LABEL,
@@ -170,6 +171,16 @@ def closed_warnings(reports, names=None) -> list[str]:
 
 
 # ------------------------------------------------------------------ orient_parts / export_parts
+def read_parts_region(op, context):
+    """`BolusOperator.read_region` for orient_parts; on a bolus solid without the zero-area refusal:
+    the booleans that cut and engrave it leave a few slivers (their area is 0 or nearly so, so
+    they add nothing to WQ / WU: the orientation core takes them), and they do not open the solid."""
+    if not is_bolus_object(context.active_object):
+        return op.read_region(context, allow_nonmanifold=True)
+    region = mesh_io.read_region(context)
+    return region, MeshTopology(region.V, region.F), list(region.warnings)
+
+
 def orient_options(region, tri_labels, skin_side_up: bool) -> dict:
     """Keyword arguments for `orient_print_parts`: on a bolus solid "skin side up" favours the
     direction its inner face (SIDE_INNER, against the skin) looks to, so that face comes out on

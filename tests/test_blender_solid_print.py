@@ -265,3 +265,36 @@ def test_remaking_the_bolus_drops_its_old_parts(bpy_addon, scene):
     bolus = bpy.data.objects["dome_bolus"]
     assert "bolus_print_part" not in bolus.data.attributes
     assert not {"bolus_connectors", "bolus_print_table", "bolus_orient_table"} & set(bolus.keys())
+
+
+def test_orient_parts_takes_slivers_of_a_solid(bpy_addon, scene, capfd):
+    """The booleans that cut and engrave a bolus leave a few zero-area slivers; they do not open the
+    solid and add nothing to the print figures, so orient_parts on a bolus takes them (on a skin
+    surface they are still refused).  Here a closed box with one zero-area triangle (a, b, m), m
+    the midpoint of its edge ab, stands in for such a bolus."""
+    from conftest import make_object
+    from meshgen import box
+
+    bpy = bpy_addon
+    V, F = box((40.0, 30.0, 20.0), n=2)
+    a, b, c = F[0]
+    m = len(V)
+    V = np.r_[V, [(V[a] + V[b]) / 2]]
+    F = np.r_[F[1:], [[a, m, c], [m, b, c], [a, b, m]]]
+    assert closed_and_consistent(F)[0], "test setup: the box must stay closed"
+    ob = make_object(bpy, V, F, name="slab_bolus", scale_length=0.001)
+    me = ob.data
+    me.attributes.new("bolus_shell_side", "INT", "FACE")
+    part = me.attributes.new("bolus_print_part", "INT", "FACE")
+    part.data.foreach_set("value", (np.array([p.center[0] for p in me.polygons]) > 20.0).astype(np.int32))
+    reports(capfd)
+    assert bpy.ops.bolus.orient_parts() == {"FINISHED"}
+    out = reports(capfd)
+    assert "slab_bolus_part_0" in bpy.data.objects and "slab_bolus_part_1" in bpy.data.objects
+    assert "Warning" not in out or "zero-area" not in out, out
+    # a part is not closed here (the box is cut along a face seam, not by a solid split): said per part
+    assert "slab_bolus_part_0 is not closed" in out, out
+    # the same mesh as a skin surface (no bolus_shell_side) is refused as before
+    me.attributes.remove(me.attributes["bolus_shell_side"])
+    with pytest.raises(RuntimeError, match="zero-area triangle"):
+        bpy.ops.bolus.orient_parts()
