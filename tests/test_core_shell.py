@@ -222,3 +222,72 @@ def test_progress_reports_stages():
     assert fr == sorted(fr) and fr[0] == 0.0 and fr[-1] == 1.0
     texts = {s for _, s in seen}
     assert {"distance field", "level set", "checks"} <= texts
+
+
+def curled_sheet(na=6, ny=12):
+    """A sheet (z = 0, normals up) whose edge curls under (half a cylinder of radius 3 mm at
+    x = 40) and runs back to x = 30 at z = -6, where its border ends: near that folded border
+    the sign of the distance jumps between lattice points."""
+    top = np.stack([np.arange(0.0, 40.0, 2.0), np.zeros(20)], 1)
+    ang = np.linspace(np.pi / 2, -np.pi / 2, na + 1)
+    curl = np.stack([40.0 + 3.0 * np.cos(ang), -3.0 + 3.0 * np.sin(ang)], 1)
+    under = np.stack([np.arange(38.0, 29.0, -2.0), np.full(5, -6.0)], 1)
+    prof = np.concatenate([top, curl, under])
+    ys = np.linspace(0.0, 40.0, ny + 1)
+    V = np.array([[x, y, z] for x, z in prof for y in ys])
+    n = ny + 1
+    F = []
+    for i in range(len(prof) - 1):
+        for j in range(ny):
+            a, b, c, d = i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1
+            F += [[a, b, c], [a, c, d]]
+    return V, np.array(F)
+
+
+def test_field_bounds_agree_with_the_exact_field_at_a_folded_border():
+    """Regression: the coarse-to-fine field trusted the Lipschitz bound of the SIGNED distance
+    near an open border, where the sign jumps (ICT face's mouth corners at 1 mm: 4 lattice
+    points on the wrong side).  Every lattice point must carry the exact field's sign."""
+    import bolus_addon.core.shell as S
+
+    V, F = curled_sheet()
+    t, c, res = 5.0, 0.0, 1.0
+    skin = SkinDistance(V, F)
+    g = S._Grid(V.min(axis=0) - t - 3 * res, V.max(axis=0) + t + 3 * res, res)
+    rim_cap, band = 3 * g.sp.max(), t + 3 * g.sp.max() + skin.tri_rmax
+    coarse = S._coarse_terms(skin, g, t, c, band)
+    for lattice in (0, 1):
+        f, n_exact = S._field_coarse_to_fine(skin, g, lattice, t, c, rim_cap, band, coarse, None, 0, 1)
+        P = np.stack(np.meshgrid(*g.axes(lattice), indexing="ij"), -1).reshape(-1, 3)
+        exact = skin.field(P, t, c, rim_cap)
+        assert n_exact < len(P)
+        assert np.array_equal(f > 0, exact > 0)
+
+
+def test_hole_on_a_curved_region_cuts_only_its_channel():
+    """A hole wrapping 60 degrees around a cylinder of radius 30 mm (a far from planar loop, like
+    a nostril rim): the channel follows the surface's normals, so the shell stays one piece
+    with one through-hole and the material beside the hole is kept (a prism along the loop's
+    mean normal cuts the neighbouring shell away at the sides)."""
+    from meshgen import cylinder_piece
+    V, F = cylinder_piece(radius=30.0, angle=np.pi, length=100.0, na=24, nl=20)
+    C = V[F].mean(axis=1)
+    nrm = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    if np.einsum("ij,ij->", nrm[:, :2], C[:, :2]) < 0:
+        F = F[:, ::-1].copy()
+    ia, il = np.divmod(np.arange(len(F)) % (24 * 20), 20)
+    keep = ~((ia >= 8) & (ia < 16) & (il >= 8) & (il < 12))
+    from bolus_addon.core.topology import submesh
+    Fk, ids = submesh(F, keep)
+    V, F = V[ids], Fk
+    sh = make_shell(V, F, 8.0, 0.0, 2.0)
+    rep = closed_report(sh.V, sh.F)
+    assert sh.holes == 1 and rep["closed"] and rep["components"] == 1 and rep["genus"] == 1
+    mid = np.pi / 2  # the hole spans 60..120 degrees, z 40..60
+    u = np.array([np.cos(mid), np.sin(mid), 0.0])
+    assert np.isinf(ray_thickness(sh.V, sh.F, [25.0 * u + [0, 0, 50.0]], [u], 30.0))[0]
+    # beside the hole (at 50 degrees, 10 degrees from its edge) the wall is whole
+    w = np.array([np.cos(np.radians(50)), np.sin(np.radians(50)), 0.0])
+    d = ray_thickness(sh.V, sh.F, [25.0 * w + [0, 0, 50.0]], [w], 30.0)
+    assert d[0] == pytest.approx(5.0, abs=0.3)
+    assert sh.thickness_min >= 0.95 * 8.0

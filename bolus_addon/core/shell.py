@@ -39,7 +39,7 @@ import manifold3d as m3
 from .distance_field import SkinDistance
 from .errors import BolusError
 from .solid import SIDE_INNER, SIDE_OUTER, SIDE_RIM, closed_report, from_manifold, ray_thickness
-from .topology import check_mesh
+from .topology import as_mesh_arrays, check_mesh
 
 __all__ = ["Shell", "check_shell_request", "make_shell", "MAX_THICKNESS_MM", "MAX_GRID_POINTS"]
 
@@ -48,6 +48,8 @@ MAX_THICKNESS_MM = 50.0
 MIN_VOXELS_ACROSS = 4
 #: lattice points of the field (both lattices) above which the request is refused (memory)
 MAX_GRID_POINTS = 120_000_000
+#: skin of the rest of the body deeper than this (or one voxel) inside the shell is a collision
+COLLISION_TOL_MM = 1.0
 #: pieces of the solid below this fraction of the largest one's volume are dropped (crumbs)
 KEEP_PIECE_FRACTION = 0.02
 
@@ -373,11 +375,13 @@ def _vertex_normals(V, F):
 def _measure_thickness(skin, M, V, F, side, t, c, res, max_rays=1500):
     """SPEC thickness: rays from inner-face vertices along the inner face's normal (into the
     material) to the outer face, on inner points farther than t from the rim.
-    Returns (thicknesses of rays that exit through the outer face, number of rays,
-    number ending elsewhere, spot of the minimum)."""
+    Returns (thicknesses of the rays that exit through the outer face, counts {"rays",
+    "outer", "skin": met the inner face again across a valley or cavity the bolus fills (beside
+    the nose, a nostril pocket), "wall": left through the rim or a hole channel, "none": no hit
+    (an origin in a crease whose normal points out of the material)}, spot of the minimum)."""
     inner = side == SIDE_INNER
     if not inner.any():
-        return np.zeros(0), 0, 0, None
+        return np.zeros(0), {"rays": 0, "outer": 0, "skin": 0, "wall": 0, "none": 0}, None
     Fi = F[inner]
     vn = _vertex_normals(V, Fi)  # outward normal of the inner face points into the body
     verts = np.unique(Fi)
@@ -393,20 +397,37 @@ def _measure_thickness(skin, M, V, F, side, t, c, res, max_rays=1500):
     dist, pts = ray_thickness(V, F, O, D, L, manifold=M, min_mm=1e-3, return_points=True)
     hit = np.isfinite(dist)
     outer = np.zeros(len(dist), dtype=bool)
+    again = np.zeros(len(dist), dtype=bool)
     if hit.any():
         a, b, _ = skin.terms(pts[hit], t, c, 3 * res)
-        outer[np.nonzero(hit)[0]] = np.abs(b) < max(res, 0.05 * t)
+        tol = max(res, 0.05 * t)
+        outer[np.nonzero(hit)[0]] = np.abs(b) < tol
+        again[np.nonzero(hit)[0]] = (np.abs(a) < tol) & (np.abs(b) >= tol)
     th = dist[outer]
     spot = O[outer][np.argmin(th)] if len(th) else None
-    return th, len(dist), int(np.sum(~outer)), spot
+    counts = {"rays": len(dist), "outer": int(outer.sum()), "skin": int(again.sum()),
+              "wall": int(np.sum(hit & ~outer & ~again)), "none": int(np.sum(~hit))}
+    return th, counts, spot
 
 
-def _collision(skin, others, t, c, res):
-    """Points of the rest of the skin (vertices, edge midpoints, centroids) inside the shell:
-    (count, deepest depth mm, spot (3,)) or (0, 0, None)."""
-    V2, F2 = others
-    V2 = np.asarray(V2, dtype=np.float64)
-    F2 = np.asarray(F2, dtype=np.int64).reshape(-1, 3)
+def _inside(M, P, reach):
+    """(k,) bool: points P (k,3) inside the closed Manifold M (odd number of crossings along
+    at least two of three skew rays of length ``reach``)."""
+    dirs = np.array([[0.5773, 0.5774, 0.5775], [-0.6, 0.48, 0.64], [0.36, -0.8, 0.48]])
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    votes = np.zeros(len(P), dtype=int)
+    for d in dirs:
+        for i, p in enumerate(P):
+            votes[i] += len(M.ray_cast(tuple(p), tuple(p + reach * d))) % 2
+    return votes >= 2
+
+
+def _collision(skin, others, t, c, res, M):
+    """Points of the rest of the skin (vertices, edge midpoints, centroids) deeper than
+    COLLISION_TOL_MM (or one voxel) inside the shell's field (a fold of the skin just beyond the
+    region's border dips into the rim zone by a fraction of a millimetre: not a collision) and inside the finished solid M (the hole channels are cut
+    out of it): (count, deepest depth mm, spot (3,)) or (0, 0, None)."""
+    V2, F2 = as_mesh_arrays(*others)
     pts = [V2]
     if len(F2):
         A, B, C = V2[F2[:, 0]], V2[F2[:, 1]], V2[F2[:, 2]]
@@ -422,12 +443,17 @@ def _collision(skin, others, t, c, res):
     if len(P) == 0:
         return 0, 0.0, None
     f = skin.field(P, t, c, 3 * res)
-    tol = max(0.5 * res, 0.25)
-    bad = f > tol
-    if not bad.any():
+    tol = max(res, COLLISION_TOL_MM)
+    cand = np.nonzero(f > tol)[0]
+    if len(cand) == 0:
         return 0, 0.0, None
-    k = int(np.argmax(f))
-    return int(bad.sum()), float(f[k]), P[k]
+    cand = cand[np.argsort(-f[cand])][:200]  # the deepest ones
+    reach = 2.0 * float(np.linalg.norm(skin.V.max(axis=0) - skin.V.min(axis=0))) + 4 * t
+    ins = cand[_inside(M, P[cand], reach)]
+    if len(ins) == 0:
+        return 0, 0.0, None
+    k = ins[int(np.argmax(f[ins]))]
+    return len(ins), float(f[k]), P[k]
 
 
 def _fmt(p):
@@ -526,7 +552,8 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     side[(b < a) & (b <= r)] = SIDE_OUTER
     side[np.minimum(np.minimum(a, b), r) > 0.25 * res] = SIDE_RIM  # faces of the hole cutters
 
-    th, nrays, nother, spot = _measure_thickness(skin, M, Vo, Fo, side, t, c, res)
+    th, rays, spot = _measure_thickness(skin, M, Vo, Fo, side, t, c, res)
+    stats["rays"] = rays
     if len(th):
         tmin, tmean, tmax = float(th.min()), float(th.mean()), float(th.max())
         if tmin < 0.95 * (t - c):
@@ -534,13 +561,16 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     else:
         tmin = tmean = tmax = float("nan")
         warnings.append("the thickness could not be measured: no ray from the inner face reached the outer face")
-    if nrays and nother > 0.05 * nrays:
-        warnings.append(f"{nother} of {nrays} rays from the inner face ended on the inner face or a wall before "
-                        "the outer face (a cavity filled by the bolus, e.g. a nostril pocket, or a fold)")
+    if rays["rays"] and rays["outer"] < 0.95 * rays["rays"]:
+        warnings.append(
+            f"of {rays['rays']} rays from the inner face (along its normal) {rays['outer']} reached the outer face; "
+            f"{rays['skin']} met the skin again across a valley or cavity the bolus fills (e.g. beside the nose), "
+            f"{rays['wall']} left through the rim or a hole channel, {rays['none']} found no wall (creases): "
+            "min / mean / max count the first kind only")
 
     if others is not None:
         _progress(progress, 0.95, "collision with the rest of the skin")
-        n, depth, where = _collision(skin, others, t, c, res)
+        n, depth, where = _collision(skin, others, t, c, res, M)
         if n:
             raise BolusError(
                 f"the shell would run into the rest of the skin near {_fmt(where)} ({n} skin point(s), up to "
