@@ -298,16 +298,16 @@ def test_region_of_no_area_refused(bpy_addon, scene):
 
 
 def test_collision_with_the_rest_of_the_skin_refused(bpy_addon, scene):
-    """A chin bolus touching the neck: the selected sheet's 6 mm shell would run into an
-    unselected sheet 3 mm above it; refused, nothing left, the source unchanged."""
+    """A chin bolus touching the neck: the selected sheet's 4 mm shell would run into an
+    unselected sheet 2 mm above it (2 mm deep inside it); refused, nothing left, the source unchanged."""
     bpy = bpy_addon
     n = 8
     xs, ys = np.meshgrid(np.linspace(0, 40, n + 1), np.linspace(0, 40, n + 1), indexing="ij")
     sheet = np.c_[xs.ravel(), ys.ravel(), np.zeros(xs.size)]
     idx = lambda i, j: i * (n + 1) + j  # noqa: E731
     quads = [[idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)] for i in range(n) for j in range(n)]
-    # the second sheet: the same grid 3 mm higher, shifted by 20 mm, facing down (towards the first)
-    top = sheet + [20.0, 0.0, 3.0]
+    # the second sheet: the same grid 2 mm higher, shifted by 20 mm, facing down (towards the first)
+    top = sheet + [20.0, 0.0, 2.0]
     V = np.r_[sheet, top]
     F = quads + [[v + len(sheet) for v in q[::-1]] for q in quads]
     ob = make_object(bpy, V, F, name="chin", scale_length=0.001)
