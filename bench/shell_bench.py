@@ -411,7 +411,8 @@ def work_ours(data: dict, job: dict) -> tuple[dict, dict]:
     V, F = data["V"], data["F"]
     sh, st = measured(lambda: make_shell(V, F, thickness=job["thickness"], resolution=job["resolution"]))
     st.update(volume_mm3=float(sh.volume_mm3), holes=int(sh.holes), warnings=list(sh.warnings),
-              self_thickness=[float(sh.thickness_min), float(sh.thickness_mean), float(sh.thickness_max)])
+              self_thickness=[float(sh.thickness_min), float(sh.thickness_mean), float(sh.thickness_max)],
+              shell_stats=getattr(sh, "stats", None))
     return {"V": sh.V, "F": sh.F, "side": sh.side}, st
 
 
@@ -453,6 +454,11 @@ def work_parts(data: dict, job: dict) -> tuple[dict, dict]:
 WORKERS = {"ours": work_ours, "solidify": work_solidify, "parts": work_parts}
 
 
+def _plain(o):
+    """JSON for numpy values (arrays as lists, scalars as numbers), anything else as its text."""
+    return o.tolist() if hasattr(o, "tolist") else str(o)
+
+
 def worker(job_path: str) -> int:
     """Child process: run one job (JSON: kind, input .npz, output .npz, settings), write arrays + stats."""
     import numpy as np
@@ -461,7 +467,7 @@ def worker(job_path: str) -> int:
     with np.load(job["input"]) as z:
         data = {k: z[k] for k in z.files}
     out, stats = WORKERS[job["kind"]](data, job)
-    np.savez(job["output"], stats=np.array(json.dumps(stats, default=float)), **out)
+    np.savez(job["output"], stats=np.array(json.dumps(stats, default=_plain)), **out)
     return 0
 
 
@@ -590,7 +596,7 @@ def _f(x, fmt="{:.2f}") -> str:
 
 def closed_text(rep: dict) -> str:
     if rep["closed"]:
-        return "yes"
+        return "yes" if rep.get("components", 1) <= 1 else f"yes, {rep['components']} pieces"
     bits = [f"{rep[k]} {k.split('_')[0]}" for k in ("boundary_edges", "nonmanifold_edges", "inconsistent_edges")
             if rep.get(k)]
     return "no (" + ", ".join(bits) + " edges)" if bits else "no"

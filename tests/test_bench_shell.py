@@ -177,6 +177,13 @@ def test_tables_keep_their_columns(sb):
     assert text.startswith("## Printed bolus") and "Σ volume / shell" in text
 
 
+def test_closed_text(sb):
+    assert sb.closed_text({"closed": True, "components": 1}) == "yes"
+    assert sb.closed_text({"closed": True, "components": 2}) == "yes, 2 pieces"
+    assert sb.closed_text({"closed": False, "boundary_edges": 0, "nonmanifold_edges": 2,
+                           "inconsistent_edges": 1}) == "no (2 nonmanifold, 1 inconsistent edges)"
+
+
 def test_target_lines(sb):
     rows = fake_rows()
     rows[0]["runs"][0]["method"] = "ours 0.5 mm"
