@@ -291,3 +291,35 @@ def test_hole_on_a_curved_region_cuts_only_its_channel():
     d = ray_thickness(sh.V, sh.F, [25.0 * w + [0, 0, 50.0]], [w], 30.0)
     assert d[0] == pytest.approx(5.0, abs=0.3)
     assert sh.thickness_min >= 0.95 * 8.0
+
+
+def ict_region(centre, radius):
+    """Whole triangles of the example face (cm -> mm) within radius of centre."""
+    from pathlib import Path
+
+    from bolus_addon.core.objfile import load_obj
+    from bolus_addon.core.topology import submesh
+    V, F, _ = load_obj(Path(__file__).resolve().parents[1] / "assets" / "ict_face_narrow.obj", 10.0)
+    keep = np.all(np.linalg.norm(V[F] - np.asarray(centre), axis=2) < radius, axis=1)
+    Fr, ids = submesh(F, keep)
+    return V[ids], Fr
+
+
+def test_shell_arrays_read_back_unchanged():
+    """Regression: the level set's output held coincident vertices that manifold3d collapses
+    when the arrays are read back (as the part cutter does), pinching off crumbs: the nose
+    tip's shell read back as 2 pieces and 4 triangles fewer.  The shell's arrays must be a
+    fixed point of to_manifold / from_manifold."""
+    V, F = ict_region([0.0, 0.91, 130.88], 15.0)  # the nose tip
+    sh = make_shell(V, F, 6.0, 0.0, 1.5)
+    M = to_manifold(sh.V, sh.F)
+    assert M.num_tri() == len(sh.F) and len(M.decompose()) == 1
+    assert closed_report(sh.V, sh.F)["components"] == 1
+
+
+def test_mouth_corner_crease_without_inner_normal():
+    """Regression: at the folded mouth corner the inner face's faces around a vertex cancel
+    (zero normal) and the thickness rays refused it ("direction 1082 is zero")."""
+    V, F = ict_region([-14.9, -34.5, 108.2], 20.0)
+    sh = make_shell(V, F, 10.0, 0.0, 1.0)
+    assert closed_report(sh.V, sh.F)["closed"] and np.isfinite(sh.thickness_min)

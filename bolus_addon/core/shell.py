@@ -38,7 +38,7 @@ import manifold3d as m3
 
 from .distance_field import SkinDistance
 from .errors import BolusError
-from .solid import SIDE_INNER, SIDE_OUTER, SIDE_RIM, closed_report, from_manifold, ray_thickness
+from .solid import SIDE_INNER, SIDE_OUTER, SIDE_RIM, closed_report, from_manifold, ray_thickness, to_manifold
 from .topology import as_mesh_arrays, check_mesh
 
 __all__ = ["Shell", "check_shell_request", "make_shell", "MAX_THICKNESS_MM", "MAX_GRID_POINTS"]
@@ -385,6 +385,9 @@ def _measure_thickness(skin, M, V, F, side, t, c, res, max_rays=1500):
     Fi = F[inner]
     vn = _vertex_normals(V, Fi)  # outward normal of the inner face points into the body
     verts = np.unique(Fi)
+    verts = verts[np.linalg.norm(vn[verts], axis=1) > 0.5]  # a crease's faces can cancel: no normal there
+    if len(verts) == 0:
+        return np.zeros(0), {"rays": 0, "outer": 0, "skin": 0, "wall": 0, "none": 0}, None
     drim, _ = skin.rim_tree.query(V[verts], workers=2)
     cand = verts[drim > t]
     if len(cand) == 0:
@@ -393,7 +396,7 @@ def _measure_thickness(skin, M, V, F, side, t, c, res, max_rays=1500):
         cand = cand[np.linspace(0, len(cand) - 1, max_rays).round().astype(int)]
     O = V[cand]
     D = -vn[cand]
-    L = 3.0 * t + 2 * res
+    L = 5.0 * t + 2 * res  # along the normal a filled valley is up to 4 t thick
     dist, pts = ray_thickness(V, F, O, D, L, manifold=M, min_mm=1e-3, return_points=True)
     hit = np.isfinite(dist)
     outer = np.zeros(len(dist), dtype=bool)
@@ -529,20 +532,13 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
             raise BolusError(f"cutting the holes through the shell failed (manifold3d: {M.status()})")
 
     _progress(progress, 0.82, "cleaning up")
-    comps = M.decompose()
-    if len(comps) > 1:
-        vols = np.array([p.volume() for p in comps])
-        keep = vols >= KEEP_PIECE_FRACTION * vols.max()
-        dropped = vols[~keep]
-        if len(dropped):
-            warnings.append(f"{len(dropped)} small piece(s) of {dropped.sum():.3g} mm^3 in total, cut off by the hole "
-                            "channels or thinner than the resolution, were removed")
-        kept = [p for p, k in zip(comps, keep) if k]
-        M = m3.Manifold.batch_boolean(kept, m3.OpType.Add) if len(kept) > 1 else kept[0]
-        if len(kept) > 1:
-            warnings.append(f"the shell has {len(kept)} separate pieces (the region has parts farther apart than "
-                            "the thickness)")
-    Vo, Fo = from_manifold(M)
+    M, Vo, Fo, dropped, pieces = _clean(M)
+    if dropped:
+        warnings.append(f"{len(dropped)} small piece(s) of {sum(dropped):.3g} mm^3 in total, cut off by the hole "
+                        "channels or thinner than the resolution, were removed")
+    if pieces > 1:
+        warnings.append(f"the shell has {pieces} separate pieces (the region has parts farther apart than the "
+                        "thickness)")
 
     _progress(progress, 0.86, "checks")
     # the terms at the vertices (half as many as faces), averaged over each face
@@ -581,6 +577,35 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     return Shell(V=Vo, F=Fo, side=side, thickness=t, clearance=c, resolution=res, volume_mm3=float(M.volume()),
                  thickness_min=tmin, thickness_mean=tmean, thickness_max=tmax, holes=len(holes), warnings=warnings,
                  stats=stats)
+
+
+def _drop_crumbs(M):
+    """(M without pieces below KEEP_PIECE_FRACTION of the largest one's volume, dropped volumes)."""
+    comps = M.decompose()
+    if len(comps) <= 1:
+        return M, []
+    vols = np.array([p.volume() for p in comps])
+    keep = vols >= KEEP_PIECE_FRACTION * vols.max()
+    kept = [p for p, k in zip(comps, keep) if k]
+    M = m3.Manifold.batch_boolean(kept, m3.OpType.Add) if len(kept) > 1 else kept[0]
+    return M, [float(v) for v in vols[~keep]]
+
+
+def _clean(M):
+    """Crumbs dropped, and the arrays made stable: manifold3d's own output can hold coincident
+    vertices (grid points snapped onto the surface) that it collapses when the arrays are read
+    back, which can pinch off more crumbs, so round-trip until reading back changes nothing.
+    Returns (Manifold, V, F, dropped volumes, pieces)."""
+    dropped = []
+    for _ in range(4):
+        M, d = _drop_crumbs(M)
+        dropped += d
+        V, F = from_manifold(M)
+        back = to_manifold(V, F, "the shell")
+        if back.num_tri() == len(F) and len(back.decompose()) == len(M.decompose()):
+            break
+        M = back
+    return M, V, F, dropped, len(M.decompose())
 
 
 def _check_region(skin):
