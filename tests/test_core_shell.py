@@ -317,9 +317,29 @@ def test_shell_arrays_read_back_unchanged():
     assert closed_report(sh.V, sh.F)["components"] == 1
 
 
-def test_mouth_corner_crease_without_inner_normal():
-    """Regression: at the folded mouth corner the inner face's faces around a vertex cancel
-    (zero normal) and the thickness rays refused it ("direction 1082 is zero")."""
+def test_mouth_corner_region_builds():
+    """The folded mouth corner of the example face (where the sign of the distance jumps)."""
     V, F = ict_region([-14.9, -34.5, 108.2], 20.0)
     sh = make_shell(V, F, 10.0, 0.0, 1.0)
     assert closed_report(sh.V, sh.F)["closed"] and np.isfinite(sh.thickness_min)
+
+
+def test_thickness_rays_skip_inner_vertices_without_a_normal():
+    """Regression: where the inner faces around a vertex cancel (a crease folded flat; seen at
+    the mouth corner of the example face before the read-back clean-up) the ray direction was
+    zero and ray_thickness refused the whole measurement ("direction 1082 is zero")."""
+    import bolus_addon.core.shell as S
+    from meshgen import box
+
+    skin = SkinDistance(*grid(10, 10, 100.0))
+    Vb, Fb = box((20.0, 20.0, 10.0), n=2)
+    Vb = Vb + [40.0, 40.0, 0.0]
+    pillow = np.array([[50.0, 50.0, 5.0], [51.0, 50.0, 5.0], [50.0, 51.0, 5.0]])
+    V = np.r_[Vb, pillow]
+    F = np.r_[Fb, [[len(Vb), len(Vb) + 1, len(Vb) + 2], [len(Vb), len(Vb) + 2, len(Vb) + 1]]]
+    C = V[F].mean(axis=1)
+    side = np.where(C[:, 2] < 1e-9, SIDE_INNER, SIDE_OUTER).astype(np.int8)
+    side[-2:] = SIDE_INNER  # the pillow's two faces: normals cancel at its three vertices
+    th, rays, _ = S._measure_thickness(skin, to_manifold(Vb, Fb), V, F, side, 10.0, 0.0, 1.0)
+    assert rays["rays"] == 9 and rays["outer"] == 9
+    np.testing.assert_allclose(th, 10.0)
