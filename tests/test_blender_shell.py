@@ -140,7 +140,8 @@ def test_cap_shell_object_mode(bpy_addon, scene, capfd):
     assert bolus["bolus_source"] == "dome" and bolus["bolus_label"] == "" and bolus["bolus_clearance_mm"] == 0.0
     assert bolus.users_collection[0] == ob.users_collection[0]
     # the report: volume, mass, thickness figures, holes, time
-    m = re.search(r"Made 'dome_bolus': ([\d.]+) cm³, ([\d.]+) g at 1.04 g/cm³; wall ([\d.]+) / ([\d.]+) / ([\d.]+) mm", out)
+    m = re.search(r"Made 'dome_bolus': ([\d.]+) cm³, ([\d.]+) g at 1.04 g/cm³; "
+                  r"wall ([\d.]+) / ([\d.]+) / ([\d.]+) mm", out)
     assert m, out
     assert float(m.group(1)) == pytest.approx(vol / 1000, abs=0.06)
     assert float(m.group(2)) == pytest.approx(vol / 1000 * 1.04, abs=0.06)
@@ -426,4 +427,5 @@ def test_transformed_source(bpy_addon, scene, mirror):
     r = np.linalg.norm(P, axis=1)
     assert np.abs(r[inner[away[inner]]] - 12.0).max() <= RES_CAP / 2 + 0.02
     assert np.abs(r[outer[away[outer]]] - 16.0).max() <= RES_CAP / 2 + 0.02
-    assert signed_volume(V, T) == pytest.approx(analytic_volume(12.0, 4.0), rel=0.03)  # -1.7 %: 1 mm voxels on a small dome
+    # -1.7 %: 1 mm voxels on a small dome (the 1 % test is on the larger cap)
+    assert signed_volume(V, T) == pytest.approx(analytic_volume(12.0, 4.0), rel=0.03)

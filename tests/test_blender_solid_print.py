@@ -148,7 +148,8 @@ def test_print_segment_without_stored_skin_refused(bpy_addon, scene):
     _, bolus = make_bolus(bpy, small=True)
     bpy.data.meshes.remove(bpy.data.meshes[bolus["bolus_skin_mesh"]])
     before = mesh_snapshot(bolus.data)
-    with pytest.raises(RuntimeError, match=r"'dome_bolus' has lost its stored skin mesh .*run Make Bolus again on 'dome'"):
+    with pytest.raises(RuntimeError,
+                       match=r"'dome_bolus' has lost its stored skin mesh .*run Make Bolus again on 'dome'"):
         bpy.ops.bolus.print_segment(parts=2)
     assert_same_mesh(mesh_snapshot(bolus.data), before)
     assert "bolus_print_part" not in bolus.data.attributes
