@@ -20,7 +20,6 @@ import time
 
 import bpy
 import numpy as np
-from bpy.props import FloatProperty, StringProperty
 from mathutils import Matrix
 
 from . import mesh_io
