@@ -2,7 +2,7 @@
 
 Run from the repository root:
 
-    .venv/bin/python bench/shell_bench.py            # three regions, 0.5 and 1.0 mm, parts (under 10 minutes)
+    .venv/bin/python bench/shell_bench.py            # three regions, 0.5 and 1.0 mm, parts (about 12 minutes)
     .venv/bin/python bench/shell_bench.py --quick    # the example nose region at 1.0 mm only
     .venv/bin/python bench/shell_bench.py --json out/shell_bench.json
     .venv/bin/python bench/shell_bench.py --markdown docs/benchmarks.md   # append the tables (make bench)
@@ -23,9 +23,8 @@ the bolus grows on):
 For every region, each call in a child process of its own (``--worker``: the figures
 of one call do not depend on what ran before, and the peak memory is the child's):
 
-* ours: ``make_shell(V, F, thickness=10, resolution=r)`` for r in ``RESOLUTIONS`` (0.5 and 1.0 mm on the
-  example nose, 1.0 mm on the two face crops: make_shell takes minutes there at 1.0 mm, four to eight times
-  that at 0.5 mm; ``--resolution R`` (repeatable) runs R on every region);
+* ours: ``make_shell(V, F, thickness=10, resolution=r)`` for r in ``RESOLUTIONS`` (0.5 and 1.0 mm;
+  ``--resolution R`` (repeatable) runs R instead);
 * the peer: Blender's Solidify modifier on a mesh object of the same region,
   ``solidify_mode='NON_MANIFOLD'`` (complex), ``thickness=10``, ``offset=+1`` (the new
   face on the side the normals point to), ``use_rim=True``, ``use_even_offset=True``,
@@ -55,7 +54,8 @@ Then, measured here the same way for both (``measure_solid``):
   the source face index).
 
 Parts (when ``core.solid_parts.split_solid`` is there, else a printed note): the
-region's finest shell is split into 3 parts along the ABcut print
+region's shell at ``PARTS_RESOLUTION`` (0.5 mm on the nose, 1.0 mm on the face crops; the
+finest one run when that one is not) is split into 3 parts along the ABcut print
 segmentation of its skin (``print_segment(skin, 3, rng=0)``) with peg/hole connectors
 (clearance 0.2 mm): the time of ``split_solid``, each part closed?, the parts' volumes
 against the shell's, and the total support volume (SPEC) of the parts, each in its best
@@ -82,7 +82,9 @@ from benchutil import ROOT, SHARED_MESHES, Table
 from unfold_bench import midpoint_subdivide, region_around, submesh
 
 THICKNESS_MM = 10.0
-RESOLUTIONS = {"example nose": (0.5, 1.0), "nefertiti face": (1.0,), "demosthenes face": (1.0,)}
+RESOLUTIONS = {"example nose": (0.5, 1.0), "nefertiti face": (0.5, 1.0), "demosthenes face": (0.5, 1.0)}
+#: the shell each region's parts are cut from (the face crops' 0.5 mm shells have over a million triangles)
+PARTS_RESOLUTION = {"example nose": 0.5, "nefertiti face": 1.0, "demosthenes face": 1.0}
 RESOLUTIONS_QUICK = (1.0,)
 NOSE_RADIUS_MM = 45.0  # the demo's treatment area (scripts/demo.py --radius default)
 FACE_RADIUS_MM = 100.0
@@ -510,9 +512,9 @@ def have(module: str, name: str) -> bool:
         return False
 
 
-def bench_region(region: dict, resolutions, tmp: Path, keep: bool = False) -> dict:
-    """Ours at each resolution (mm), both Solidify modes, then the parts of the finest shell (module doc).
-    The child processes' input and output arrays stay in ``tmp`` when ``keep``."""
+def bench_region(region: dict, resolutions, tmp: Path, keep: bool = False, parts_resolution=None) -> dict:
+    """Ours at each resolution (mm), both Solidify modes, then the parts of the shell at ``parts_resolution``
+    (when it was run, else the finest) (module doc).  The child processes' arrays stay in ``tmp`` when ``keep``."""
     import numpy as np
 
     from bolus_addon.core.solid import SIDE_OUTER, SIDE_RIM
@@ -553,7 +555,7 @@ def bench_region(region: dict, resolutions, tmp: Path, keep: bool = False) -> di
         row["parts"] = {"note": "core.solid_parts.split_solid is not there yet: parts not benchmarked"}
         print(f"   parts: {row['parts']['note']}")
         return row
-    res = min(resolutions)
+    res = parts_resolution if parts_resolution in resolutions else min(resolutions)
     if res not in shells:
         row["parts"] = {"note": f"no {res:g} mm shell to split"}
         print(f"   parts: {row['parts']['note']}")
@@ -808,7 +810,8 @@ def main(argv=None) -> int:
                 rows.append(benchutil.error_row("region", name, exc))
                 continue
             try:
-                rows.append(bench_region(region, resolutions_for(name, args), work, bool(args.keep)))
+                rows.append(bench_region(region, resolutions_for(name, args), work, bool(args.keep),
+                                         PARTS_RESOLUTION.get(name)))
             except Exception as exc:
                 rows.append(benchutil.error_row("region", name, exc))
     total = time.perf_counter() - t_start

@@ -196,6 +196,7 @@ def test_target_lines(sb):
 def test_resolutions_per_region(sb):
     ns = argparse.Namespace
     assert sb.resolutions_for("example nose", ns(resolution=[], quick=False)) == (0.5, 1.0)
+    assert all(sb.PARTS_RESOLUTION[n] in sb.RESOLUTIONS[n] for n in sb.REGIONS)
     assert sb.resolutions_for("nefertiti face", ns(resolution=[], quick=True)) == (1.0,)
     assert sb.resolutions_for("nefertiti face", ns(resolution=[1.0, 0.5, 1.0], quick=True)) == (0.5, 1.0)
     assert set(sb.RESOLUTIONS) == set(sb.REGIONS) and set(sb.QUICK_REGIONS) <= set(sb.REGIONS)
