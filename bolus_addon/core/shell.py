@@ -531,6 +531,8 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
         if str(M.status()).split(".")[-1] != "NoError":
             raise BolusError(f"cutting the holes through the shell failed (manifold3d: {M.status()})")
 
+    T2 = time.process_time()
+    stats["holes_s"] = T2 - T1 - stats["level_set_s"]
     _progress(progress, 0.82, "cleaning up")
     M, Vo, Fo, dropped, pieces = _clean(M)
     if dropped:
@@ -540,6 +542,8 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
         warnings.append(f"the shell has {pieces} separate pieces (the region has parts farther apart than the "
                         "thickness)")
 
+    T3 = time.process_time()
+    stats["clean_s"] = T3 - T2
     _progress(progress, 0.86, "checks")
     # the terms at the vertices (half as many as faces), averaged over each face
     a, b, r = (x[Fo].mean(axis=1) for x in skin.terms(Vo, t, c, 3 * res))
@@ -548,7 +552,10 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     side[(b < a) & (b <= r)] = SIDE_OUTER
     side[np.minimum(np.minimum(a, b), r) > 0.25 * res] = SIDE_RIM  # faces of the hole cutters
 
+    T4 = time.process_time()
+    stats["sides_s"] = T4 - T3
     th, rays, spot = _measure_thickness(skin, M, Vo, Fo, side, t, c, res)
+    stats["thickness_s"] = time.process_time() - T4
     stats["rays"] = rays
     if len(th):
         tmin, tmean, tmax = float(th.min()), float(th.mean()), float(th.max())
@@ -602,9 +609,10 @@ def _clean(M):
         dropped += d
         V, F = from_manifold(M)
         back = to_manifold(V, F, "the shell")
-        if back.num_tri() == len(F) and len(back.decompose()) == len(M.decompose()):
+        stable = back.num_tri() == len(F) and len(back.decompose()) == len(M.decompose())
+        M = back  # read back from arrays: ray casts on it are fast (on a boolean's result each one took ms)
+        if stable:
             break
-        M = back
     return M, V, F, dropped, len(M.decompose())
 
 
