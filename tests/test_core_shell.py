@@ -258,6 +258,7 @@ def test_field_bounds_agree_with_the_exact_field_at_a_folded_border():
     coarse = S._coarse_terms(skin, g, t, c, band)
     for lattice in (0, 1):
         f, n_exact = S._field_coarse_to_fine(skin, g, lattice, t, c, rim_cap, band, coarse, None, 0, 1)
+        f = f[1:-1, 1:-1, 1:-1].ravel()  # drop the padding
         P = np.stack(np.meshgrid(*g.axes(lattice), indexing="ij"), -1).reshape(-1, 3)
         exact = skin.field(P, t, c, rim_cap)
         assert n_exact < len(P)
@@ -343,3 +344,24 @@ def test_thickness_rays_skip_inner_vertices_without_a_normal():
     th, rays, _ = S._measure_thickness(skin, to_manifold(Vb, Fb), V, F, side, 10.0, 0.0, 1.0)
     assert rays["rays"] == 9 and rays["outer"] == 9
     np.testing.assert_allclose(th, 10.0)
+
+
+def test_fast_lookup_matches_the_checked_lookup():
+    """The level set's lookup callback (three truncations) returns exactly the precomputed
+    lattice values: same mesh as a lookup that rounds, tests the lattice and counts misses."""
+    import bolus_addon.core.shell as S
+    from bolus_addon.core.solid import from_manifold
+
+    V, F = hemisphere(30.0, nlat=8, na=24)
+    t, c, res = 6.0, 0.0, 1.5
+    skin = SkinDistance(V, F)
+    g = S._Grid(V.min(axis=0) - t - 3 * res, V.max(axis=0) + t + 3 * res, res)
+    rim_cap, band = 3 * g.sp.max(), t + 3 * g.sp.max() + skin.tri_rmax
+    coarse = S._coarse_terms(skin, g, t, c, band)
+    f0, _ = S._field_coarse_to_fine(skin, g, 0, t, c, rim_cap, band, coarse, None, 0, 1)
+    f1, _ = S._field_coarse_to_fine(skin, g, 1, t, c, rim_cap, band, coarse, None, 0, 1)
+    M_ref, misses = S._level_set(g, f0, f1)
+    V1, F1 = from_manifold(M_ref)
+    V2, F2 = from_manifold(S._level_set_fast(g, f0, f1))
+    assert misses == 0 and len(F1) > 1000
+    assert np.array_equal(V1, V2) and np.array_equal(F1, F2)

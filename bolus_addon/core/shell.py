@@ -210,7 +210,7 @@ def _field_coarse_to_fine(skin, grid, lattice, t, c, rim_cap, band, coarse, prog
     spacings from the rim at every corner: near an open border the sign of sd jumps, and the
     rim term is not Lipschitz in concave spots), no marching-tetrahedra edge at p crosses the
     surface and the bound stands in for the value; elsewhere the field is evaluated exactly.
-    Returns (values, number evaluated exactly)."""
+    Returns (values (shape + 2) with one layer of -1 around, number evaluated exactly)."""
     lo_ab, hi_ab, hi_ud, rc = coarse
     sp = grid.sp
     spm = float(sp.max())
@@ -224,7 +224,8 @@ def _field_coarse_to_fine(skin, grid, lattice, t, c, rim_cap, band, coarse, prog
         fr = u - 2.0 * m                               # in [0, 2)
         mm.append(m)
         d2.append(np.stack([(fr * sp[a]) ** 2, ((2.0 - fr) * sp[a]) ** 2]))  # (2, n): corner 0 / 1
-    out = np.empty(shape)
+    padded = np.full(tuple(x + 2 for x in shape), -1.0)  # one layer of -1 around: see _level_set_fast
+    out = padded[1:-1, 1:-1, 1:-1]
     slab = max(1, int(1_000_000 // max(shape[1] * shape[2], 1)))
     n_exact = 0
     for i0 in range(0, shape[0], slab):
@@ -254,13 +255,14 @@ def _field_coarse_to_fine(skin, grid, lattice, t, c, rim_cap, band, coarse, prog
             n_exact += len(P)
         out[i0:i1] = vals
         _progress(progress, p0 + (p1 - p0) * i1 / shape[0], "distance field")
-    return out.ravel(), n_exact
+    return padded, n_exact
 
 
 def _level_set(grid, f0, f1):
-    """Manifold.level_set with a lookup callback on the precomputed lattices."""
-    F0 = array.array("d", f0.tobytes())
-    F1 = array.array("d", f1.tobytes())
+    """Manifold.level_set with a checked lookup (rounding, lattice test, count of calls off the
+    lattices) on the padded lattices: the reference for `_level_set_fast`.  Returns (M, misses)."""
+    F0 = array.array("d", np.ascontiguousarray(f0[1:-1, 1:-1, 1:-1]).tobytes())
+    F1 = array.array("d", np.ascontiguousarray(f1[1:-1, 1:-1, 1:-1]).tobytes())
     n0, n1 = grid.shape0, grid.shape1
     s0y, s0z = n0[1] * n0[2], n0[2]
     s1y, s1z = n1[1] * n1[2], n1[2]
@@ -300,13 +302,16 @@ def _level_set(grid, f0, f1):
 
 def _level_set_fast(grid, f0, f1):
     """Manifold.level_set with the cheapest lookup callback (about half the time of
-    `_level_set`): both lattices padded by one layer of -1, and w = (x - lo) / sp + 1.25 gives
+    `_level_set`): f0, f1 the lattices padded by one layer of -1, and w = (x - lo) / sp + 1.25 gives
     int(w) = i + 1 on lattice 0 (frac 0.25) and int(w) = i on lattice 1 (frac 0.75), so three
     truncations and one comparison find the value."""
     n0 = tuple(x + 2 for x in grid.shape0)
     n1 = tuple(x + 2 for x in grid.shape1)
-    F0 = array.array("d", np.pad(f0.reshape(grid.shape0), 1, constant_values=-1.0).tobytes())
-    F1 = array.array("d", np.pad(f1.reshape(grid.shape1), 1, constant_values=-1.0).tobytes())
+    if f0.shape != n0 or f1.shape != n1:
+        raise ValueError("_level_set_fast wants the padded lattices of _field_coarse_to_fine")
+    # flat float views of the numpy arrays: indexing them is as cheap as an array('d'), no copy
+    F0 = memoryview(np.ascontiguousarray(f0)).cast("B").cast("d")
+    F1 = memoryview(np.ascontiguousarray(f1)).cast("B").cast("d")
     s0y, s0z = n0[1] * n0[2], n0[2]
     s1y, s1z = n1[1] * n1[2], n1[2]
     o1 = s1y + s1z + 1
