@@ -4,9 +4,11 @@
     blender --background --python scripts/demo.py -- --out out     (a Blender install with the extension)
 
 Loads assets/ict_face_narrow.obj (an MIT-licensed face; the file is in cm) at true size
-in a scene where 1 unit = 1 mm, selects the treatment area around the nose in Edit Mode
-(faces within --radius mm of the nose tip), and runs the add-on's operators on it:
+in a scene where 1 unit = 1 mm, puts the 3D cursor on the nose tip and runs the add-on's
+operators as a modeler does:
 
+0. bolus.select_area       the treatment area: within --radius mm of the cursor along the skin,
+                           its border cut along a smooth curve, the nostrils left out
 1. bolus.saliency_preview  -> out/saliency.png
 2. bolus.segment           -> out/patches.png (jagged borders along mesh edges)
 3. bolus.smooth_cuts       -> out/cuts.png (the borders replaced by smooth cut lines;
@@ -14,8 +16,12 @@ in a scene where 1 unit = 1 mm, selects the treatment area around the nose in Ed
 4. bolus.unfold            -> out/pattern.png (the flat pattern, coloured by area distortion);
                               pieces not fit to cut (EL or EA above 3 %) are warned with advice
 5. bolus.export_pattern    -> out/pattern.svg (true scale: print at 100 %)
-6. bolus.print_segment, bolus.orient_parts, bolus.export_parts
-                           -> out/parts/*.stl (binary, mm), out/parts.png (the parts
+6. bolus.make_shell        -> the object face_bolus: a closed --thickness mm (10) solid on the
+                              area, --label engraved; out/section.png (a cross-section through
+                              the nose tip: the bolus filled, the skin a line, 10 mm bar)
+7. bolus.print_segment (on face_bolus), bolus.orient_parts, bolus.export_parts
+                           -> --parts (3) closed solid parts with pegs and holes,
+                              out/parts/*.stl (binary, mm, closed), out/parts.png (the parts
                               on the build plate, overhangs in red)
 
 and writes out/demo.blend and the per-patch tables (out/report.json, out/report.txt).
@@ -30,6 +36,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "scripts"))
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
@@ -45,6 +52,9 @@ def parse_args():
     ap.add_argument("--radius", type=float, default=45.0, help="treatment area: faces within this many mm of the nose tip")
     ap.add_argument("--patches", type=int, default=4)
     ap.add_argument("--parts", type=int, default=3, help="print parts")
+    ap.add_argument("--thickness", type=float, default=10.0, help="bolus thickness in mm")
+    ap.add_argument("--shell-resolution", type=float, default=0.5, help="make_shell's resolution in mm")
+    ap.add_argument("--label", default="DEMO", help="engraved on each part with its number")
     ap.add_argument("--smoothing", type=float, default=None, help="analysis smoothing in mm (default: the add-on's)")
     ap.add_argument("--resolution", type=int, default=900, help="PNG height in pixels")
     return ap.parse_args(argv)
@@ -72,35 +82,22 @@ def load_example() -> bpy.types.Object:
     return obj
 
 
-def select_treatment_area(obj: bpy.types.Object, radius_mm: float) -> np.ndarray:
-    """Select (for Edit Mode) the forward-facing faces within radius_mm of the nose tip (one connected piece)."""
-    me = obj.data
-    co = np.empty(len(me.vertices) * 3)
-    me.vertices.foreach_get("co", co)
-    co = co.reshape(-1, 3)
-    tip = co[np.argmin(co[:, 1])]  # the face looks towards -Y after the OBJ importer's Y-up conversion
-    centres = np.empty(len(me.polygons) * 3)
-    me.polygons.foreach_get("center", centres)
-    centres = centres.reshape(-1, 3)
-    normals = np.empty(len(me.polygons) * 3)
-    me.polygons.foreach_get("normal", normals)
-    # the treatment area: skin facing forward near the nose, not the inside of the nostrils
-    sel = (np.linalg.norm(centres - tip, axis=1) < radius_mm) & (normals.reshape(-1, 3)[:, 1] < -0.1)
-    # keep only the connected piece around the tip (the ball may also catch an eyelid)
-    from bolus_addon.core.topology import MeshTopology, triangulate_polygons
+def nose_tip(obj: bpy.types.Object) -> np.ndarray:
+    """World position of the nose tip (the face looks towards -Y after the OBJ importer's Y-up conversion)."""
+    co = np.array([obj.matrix_world @ v.co for v in obj.data.vertices])
+    return co[np.argmin(co[:, 1])]
 
-    corners = np.empty(len(me.loops), dtype=np.int64)
-    me.loops.foreach_get("vertex_index", corners)
-    sizes = np.empty(len(me.polygons), dtype=np.int64)
-    me.polygons.foreach_get("loop_total", sizes)
-    F, tri_poly = triangulate_polygons(corners, sizes)
-    keep = sel[tri_poly]
-    _, comp = MeshTopology(co, F[keep]).face_components()
-    tip_poly = np.nonzero(sel)[0][np.argmin(np.linalg.norm(centres[sel] - tip, axis=1))]
-    tip_comp = comp[np.nonzero(tri_poly[keep] == tip_poly)[0][0]]
-    sel = np.zeros_like(sel)
-    sel[tri_poly[keep][comp == tip_comp]] = True
-    me.polygons.foreach_set("select", sel)
+
+def select_treatment_area(obj: bpy.types.Object, radius_mm: float) -> np.ndarray:
+    """The treatment area around the nose tip, as a modeler makes it: the 3D cursor on the tip, then
+    Select Treatment Area (`bolus.select_area`: within radius_mm along the surface, the border cut
+    along a smooth curve, the nostrils left out).  Leaves Object Mode; returns the polygons' selection."""
+    bpy.context.scene.cursor.location = tuple(float(x) for x in nose_tip(obj))
+    bpy.context.view_layer.objects.active = obj
+    run_op(bpy.ops.bolus.select_area, radius_mm=radius_mm, exclude_cavities=True)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    sel = np.zeros(len(obj.data.polygons), dtype=bool)
+    obj.data.polygons.foreach_get("select", sel)
     return sel
 
 
@@ -226,6 +223,22 @@ def render_parts(hide: list, parts: list, path: Path) -> None:
         ob.hide_render = False
 
 
+def render_section(face: bpy.types.Object, bolus: bpy.types.Object, path: Path, size_px=None) -> dict:
+    """The bolus on the face cut through the nose tip by a sagittal plane (x = const), drawn exactly
+    (scripts/pictures2d.section_png): the bolus's section filled, the skin's a black line."""
+    from pictures2d import section_png
+
+    def world_tris(ob):
+        me = ob.data
+        me.calc_loop_triangles()
+        V = np.array([ob.matrix_world @ v.co for v in me.vertices])
+        F = np.array([t.vertices[:] for t in me.loop_triangles], dtype=np.int64)
+        return V, F
+
+    return section_png(path, world_tris(face), world_tris(bolus), nose_tip(face), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0),
+                       size_px=size_px)
+
+
 def run_op(op, **kw) -> float:
     t = time.perf_counter()
     result = op(**kw)
@@ -259,22 +272,33 @@ def main():
     pattern = bpy.data.objects[obj.name + "_pattern"]
     pattern_table = json.loads(pattern["bolus_pattern_table"])
 
-    # 3D printing: the treatment area (after the cuts) split into parts of balanced area,
-    # each turned to its own best print direction and written as an STL
+    # 3D printing: the bolus itself, a closed solid of --thickness mm on the treatment area (after the
+    # cuts), split into parts with pegs and holes, each turned to its best print direction, one STL each
     from bolus_addon.mesh_io import read_face_labels
+    from bolus_addon.print_ops import part_objects
 
     bpy.context.view_layer.objects.active = obj
     obj.data.polygons.foreach_set("select", read_face_labels(obj.data, "bolus_patch") >= 0)
     bpy.ops.object.mode_set(mode="EDIT")
+    t_shell = run_op(bpy.ops.bolus.make_shell, thickness_mm=args.thickness, resolution_mm=args.shell_resolution,
+                     label=args.label)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    bolus = bpy.data.objects[obj.name + "_bolus"]
+    shell = {k: bolus[k] for k in ("bolus_thickness_mm", "bolus_volume_cm3", "bolus_thickness_min_mm",
+                                   "bolus_thickness_mean_mm", "bolus_thickness_max_mm", "bolus_mass_g",
+                                   "bolus_resolution_mm") if k in bolus}
+    section = render_section(obj, bolus, out / "section.png")
+    for ob in bpy.context.view_layer.objects:
+        ob.select_set(ob is bolus)
+    bpy.context.view_layer.objects.active = bolus
     t_prs = run_op(bpy.ops.bolus.print_segment, parts=args.parts, method="ABCUT", seed=0)
     t_ori = run_op(bpy.ops.bolus.orient_parts)
-    bpy.ops.object.mode_set(mode="OBJECT")
     (out / "parts").mkdir(exist_ok=True)
     t_stl = run_op(bpy.ops.bolus.export_parts, directory=str((out / "parts").resolve()))
-    orient_table = json.loads(obj["bolus_orient_table"])
-    from bolus_addon.print_ops import part_objects
-
-    parts = part_objects(obj.name)
+    orient_table = json.loads(bolus["bolus_orient_table"])
+    joints = json.loads(bolus.get("bolus_connectors", "[]"))
+    connectors = [c for j in joints for c in j["connectors"]]
+    parts = part_objects(bolus.name)
 
     table = json.loads(obj["bolus_patch_table"])
     report = {
@@ -286,10 +310,11 @@ def main():
         "segment": jagged_table,
         "smooth_cuts": {"borders": cuts, "patches": table["patches"]},
         "pattern": pattern_table,
-        "print": {"segment": json.loads(obj["bolus_print_table"]), "orient": orient_table,
-                  "stl": sorted(p.name for p in (out / "parts").glob("*.stl"))},
+        "bolus": {**shell, "section_png": section},
+        "print": {"segment": json.loads(bolus["bolus_print_table"]), "orient": orient_table,
+                  "joints": joints, "stl": sorted(p.name for p in (out / "parts").glob("*.stl"))},
         "seconds": {"saliency_preview": round(t_sal, 3), "segment": round(t_seg, 3), "smooth_cuts": round(t_cut, 3),
-                    "unfold": round(t_unf, 3), "print_segment": round(t_prs, 3), "orient_parts": round(t_ori, 3),
+                    "unfold": round(t_unf, 3), "make_shell": round(t_shell, 3), "print_segment": round(t_prs, 3), "orient_parts": round(t_ori, 3),
                     "export_parts": round(t_stl, 3),
                     "export_pattern": round(t_svg, 3)},
     }
@@ -334,7 +359,15 @@ def main():
         lines += [f"  {r['name']}: {r['advice']}" for r in bad]
     else:
         lines.append(f"Every piece is fit to cut (EL and EA at most {warn_pct:g} %).")
-    lines.append(f"3D print: {len(parts)} parts (ABcut), layer {orient_table['layer_mm']:g} mm, overhang beyond 45 degrees "
+    lines.append(f"Bolus '{bolus.name}': {shell['bolus_thickness_mm']:g} mm asked, wall "
+                 f"{shell['bolus_thickness_min_mm']:.2f} / {shell['bolus_thickness_mean_mm']:.2f} / "
+                 f"{shell['bolus_thickness_max_mm']:.2f} mm (min / mean / max, ray casts from the inner face), "
+                 f"{shell['bolus_volume_cm3']:.1f} cm3, {shell['bolus_mass_g']:.1f} g; cross-section in section.png")
+    lines.append(f"{len(joints)} joints, {len(connectors)} connectors (peg / hole radius, mm): "
+                 + ", ".join(f"parts {c['parts'][0]}|{c['parts'][1]} {c['peg_radius']:.2f} / {c['hole_radius']:.2f}"
+                             for c in connectors))
+    lines += [f"  joint {j['parts'][0]}|{j['parts'][1]} left plain: {j['note']}" for j in joints if j["note"]]
+    lines.append(f"3D print: {len(parts)} solid parts (ABcut on the skin side, SVM planes), layer {orient_table['layer_mm']:g} mm, overhang beyond 45 degrees "
                  "(Tables 6-1, 6-2; mm3)")
     lines.append(f"{'':>8} {'triangles':>10} {'area cm2':>9} {'WQ':>9} {'WU':>9} {'support':>9}  build direction")
     for r in orient_table["rows"]:
@@ -347,9 +380,9 @@ def main():
     print("\n".join(lines))
 
     render_pattern(pattern, out / "pattern.png")
-    render_parts([obj, pattern], parts, out / "parts.png")
+    render_parts([obj, pattern, bolus], parts, out / "parts.png")
     bpy.ops.wm.save_as_mainfile(filepath=str((out / "demo.blend").resolve()))
-    print(f"wrote {out}/demo.blend, saliency.png, patches.png, cuts.png, cuts_before.png, cuts_after.png, pattern.png, parts.png, pattern.svg, parts/*.stl, report.json, report.txt")
+    print(f"wrote {out}/demo.blend, saliency.png, section.png, patches.png, cuts.png, cuts_before.png, cuts_after.png, pattern.png, parts.png, pattern.svg, parts/*.stl, report.json, report.txt")
 
 
 def run_with_addon(fn) -> None:

@@ -67,11 +67,14 @@ def plane_segments(V: np.ndarray, F: np.ndarray, origin: np.ndarray, normal: np.
 
 
 def section_png(path: Path, skin: tuple[np.ndarray, np.ndarray], bolus: tuple[np.ndarray, np.ndarray],
-                origin, normal, up, px_per_mm: float = 8.0, margin_mm: float = 6.0) -> dict:
+                origin, normal, up, px_per_mm: float = 8.0, margin_mm: float = 6.0,
+                size_px: tuple[int, int] | None = None) -> dict:
     """Draw the section of `bolus` (closed solid, filled) and `skin` (a line) by a plane.
 
     skin, bolus: (V (n,3), F (m,3)) in mm; origin, normal: the plane; up: the picture's vertical
-    (projected onto the plane).  Returns {"width_px", "height_px", "bolus_segments", "skin_segments"}."""
+    (projected onto the plane); size_px: (width, height) to fit the section into (centred, the
+    scale chosen to fit; px_per_mm is then ignored).
+    Returns {"width_px", "height_px", "px_per_mm", "bolus_segments", "skin_segments"}."""
     normal = np.asarray(normal, float) / np.linalg.norm(normal)
     up = np.asarray(up, float) - np.dot(up, normal) * normal
     up /= np.linalg.norm(up)
@@ -89,7 +92,13 @@ def section_png(path: Path, skin: tuple[np.ndarray, np.ndarray], bolus: tuple[np
     b2, s2 = to2d(segs_b), to2d(segs_s)
     lo = b2.reshape(-1, 2).min(axis=0) - margin_mm
     hi = b2.reshape(-1, 2).max(axis=0) + margin_mm
-    w, h = (np.ceil((hi - lo) * px_per_mm)).astype(int) + 1
+    if size_px is not None:
+        px_per_mm = float(min((size_px[0] - 1) / (hi[0] - lo[0]), (size_px[1] - 1) / (hi[1] - lo[1])))
+        pad = (np.array(size_px, float) - 1) / px_per_mm - (hi - lo)
+        lo, hi = lo - pad / 2, hi + pad / 2
+        w, h = size_px
+    else:
+        w, h = (np.ceil((hi - lo) * px_per_mm)).astype(int) + 1
     img = np.full((h, w, 3), 255, np.uint8)
 
     def px(P):  # (x, y) mm -> (column, row), row 0 at the top
@@ -129,5 +138,5 @@ def section_png(path: Path, skin: tuple[np.ndarray, np.ndarray], bolus: tuple[np
     r0 = h - int(2 * px_per_mm)
     img[max(r0 - 3, 0):r0, int(px_per_mm):int(px_per_mm) + bar] = SKIN_RGB
     write_png(Path(path), img)
-    return {"width_px": int(w), "height_px": int(h), "bolus_segments": int(len(segs_b)),
+    return {"width_px": int(w), "height_px": int(h), "px_per_mm": px_per_mm, "bolus_segments": int(len(segs_b)),
             "skin_segments": int(len(segs_s))}

@@ -16,9 +16,11 @@ screenshot its own UI in background mode, so there is no picture of the panel it
                                (blue shrunk, white exact, red stretched, +-10 %)
     4_pattern_svg.png          Export Pattern (SVG): the file's paths, lines and texts drawn
                                in Blender (solid cut lines, dashed 5 mm seam allowance, 50 mm bar)
-    5_print_parts.png          Split into Print Parts (the parts on the face, close-up)
-                               | Orient Print Parts: the parts on the build plate (spread
-                               in a row for the picture), faces that need support in red
+    5_bolus_section.png        Make Bolus: the 10 mm bolus on the face (close-up) | a cross-section
+                               through the nose tip (scripts/pictures2d.py: bolus filled, skin a line)
+    6_print_parts.png          Split into Print Parts on the bolus, Orient Print Parts: the solid
+                               parts with pegs and holes on the build plate (spread in a row for
+                               the picture), faces that need support in red
 
 Every picture is 800 px wide, RGB, rendered without dithering and with the Standard view
 transform (the colours are the colour maps' own), written by a small PNG writer (64 levels
@@ -258,32 +260,39 @@ def main():
     demo.render_pattern(pattern, tmp / "pattern.png")
     write_png(out / "3_pattern.png", read_png(tmp / "pattern.png"))
     render_svg(svg, out / "4_pattern_svg.png")
-    # 5. print parts, each in its own best direction, on the build plate
+    # 5. the printed bolus on the face, and a cross-section through the nose tip
     from bolus_addon.mesh_io import read_face_labels
     from bolus_addon.print_ops import part_objects
 
     bpy.context.view_layer.objects.active = obj
     obj.data.polygons.foreach_set("select", read_face_labels(obj.data, "bolus_patch") >= 0)
     bpy.ops.object.mode_set(mode="EDIT")
+    demo.run_op(bpy.ops.bolus.make_shell, thickness_mm=10.0, label="DEMO")
+    bpy.ops.object.mode_set(mode="OBJECT")
+    bolus = bpy.data.objects[obj.name + "_bolus"]
+    set_resolution(half, PANEL_HEIGHT_PX)
+    pattern.hide_render = True  # it lies on z = 0, in front of the face's close-up
+    shading = scene.display.shading
+    shading.color_type = "OBJECT"  # the face grey, the bolus blue as in the cross-section
+    obj.color, bolus.color = (0.8, 0.8, 0.8, 1.0), (0.27, 0.51, 0.86, 1.0)
+    demo.render_closeup(obj, "bolus_patch_color", tmp / "bolus.png")
+    shading.color_type = "VERTEX"
+    demo.render_section(obj, bolus, tmp / "section.png", size_px=(half, PANEL_HEIGHT_PX))
+    side_by_side([tmp / "bolus.png", tmp / "section.png"], out / "5_bolus_section.png")
+    # 6. the bolus split into solid parts with pegs and holes, each in its best direction on the plate
+    for ob in bpy.context.view_layer.objects:
+        ob.select_set(ob is bolus)
+    bpy.context.view_layer.objects.active = bolus
     demo.run_op(bpy.ops.bolus.print_segment, parts=3, method="ABCUT", seed=0)
     demo.run_op(bpy.ops.bolus.orient_parts)
-    bpy.ops.object.mode_set(mode="OBJECT")
-    set_resolution(half, PANEL_HEIGHT_PX)
-    parts = part_objects(obj.name)
-    for ob in (pattern, *parts):  # they lie on z = 0, in front of the face's close-up
-        ob.hide_render = True
-    demo.render_closeup(obj, "bolus_print_part_color", tmp / "split.png")
-    for ob in (pattern, *parts):
-        ob.hide_render = False
-    placed = [ob.matrix_world.copy() for ob in parts]
+    parts = part_objects(bolus.name)
     spread_along_x(parts)
-    demo.render_parts([obj, pattern], parts, tmp / "parts.png")
-    for ob, m in zip(parts, placed):
-        ob.matrix_world = m
-    side_by_side([tmp / "split.png", tmp / "parts.png"], out / "5_print_parts.png")
+    set_resolution(WIDTH_PX, PANEL_HEIGHT_PX)
+    demo.render_parts([obj, pattern, bolus], parts, tmp / "parts.png")
+    write_png(out / "6_print_parts.png", read_png(tmp / "parts.png"))
 
     table = json.loads(pattern["bolus_pattern_table"])
-    orient = json.loads(obj["bolus_orient_table"])
+    orient = json.loads(bolus["bolus_orient_table"])
     print(f"treatment area {int(sel.sum())} faces; sum varpi {obj['bolus_sum_varpi']:.2f} rad; "
           f"{len(json.loads(obj['bolus_patch_table'])['patches'])} patches; pattern EL {table['EL'] * 100:.2f} %, "
           f"EA {table['EA'] * 100:.2f} %; pieces " + ", ".join(

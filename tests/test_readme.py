@@ -18,6 +18,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
+#: the developers' page the README links to: venvs, tests, benchmarks, the module layout
+DEVELOPMENT = ROOT / "docs" / "development.md"
 #: the size the README aims at (issue 10: "under ~15 KB")
 MAX_README_BYTES = 16_000
 
@@ -134,7 +136,9 @@ def test_make_targets_exist(text):
     assert named and named <= targets, sorted(named - targets)
 
 
-def test_repository_paths_exist(text):
+@pytest.mark.parametrize("page", [README, DEVELOPMENT], ids=lambda p: p.name)
+def test_repository_paths_exist(page):
+    text = page.read_text(encoding="utf-8")
     paths = set(re.findall(r"`((?:scripts|bench|tests|docs|bolus_addon|assets)/[\w./*-]*)`", text))
     assert paths
     missing = sorted(p for p in paths if not list(ROOT.glob(p)))
@@ -153,8 +157,9 @@ def modules(folder: Path) -> set[str]:
     return {f.stem for f in names}
 
 
-def test_layout_lists_every_module(text):
-    """The layout block names every module of the add-on and nothing that is gone."""
+def test_layout_lists_every_module():
+    """The layout block (docs/development.md) names every module of the add-on and nothing that is gone."""
+    text = DEVELOPMENT.read_text(encoding="utf-8")
     block = text[text.index("**Layout.**"):]
     listed = set(re.findall(r"\b(\w+)\.py\b", block))
     for folder in (ROOT / "bolus_addon", ROOT / "bolus_addon" / "core"):
