@@ -42,10 +42,11 @@ Then, measured here the same way for both (``measure_solid``):
   volume in cm³;
 * thickness min / mean / max (SPEC): from every skin vertex farther than the thickness
   from the region's border (boundary loops, holes included), a ray along the skin's
-  vertex normal (eq. 3-2) to the first hit on the OUTER face (ours: faces with
-  ``side == SIDE_OUTER``; Solidify: its offset layer), Blender's ``BVHTree.ray_cast``,
-  up to ``RAY_MAX`` x the thickness ("miss" beyond; a missed ray that meets a rim or hole
-  wall, e.g. a nostril's channel, is counted with the distance to that wall);
+  vertex normal (eq. 3-2) to the first surface it meets (Blender's ``BVHTree.ray_cast``,
+  up to ``RAY_MAX`` x the thickness): the OUTER face (ours: faces with ``side ==
+  SIDE_OUTER``; Solidify: its offset layer) -- the thickness --, or else a rim or hole wall
+  (e.g. a nostril's channel), the skin again (a valley the bolus bridges: an eye socket),
+  or nothing: those are counted, not measured;
 * self-intersecting face pairs: ``BVHTree.overlap`` of the solid with itself, pairs that
   share a vertex (a position: twin vertices count as one) left out (coplanar overlaps are not
   found by it);
@@ -93,7 +94,8 @@ HEAD_MM = 230.0
 DEMOSTHENES_CHIN_Y = 0.75  # normalised units: below it the bust widens into the shoulders
 PARTS = 3
 PARTS_CLEARANCE_MM = 0.2
-RAY_MAX = 3.0  # rays longer than RAY_MAX * thickness count as missing the outer face
+RAY_MAX = 10.0  # thickness rays reach RAY_MAX * thickness
+SKIN_GAP_MM = 0.05  # a thickness ray meets the skin again only this far from its start
 BORDER_STEP_MM = 0.25  # border edges are sampled this finely for the distance to the border
 WORKER_TIMEOUT_S = 1800
 SPOTS = 3  # self-intersections: where the first few are (JSON)
@@ -214,12 +216,14 @@ def border_distance(V, F):
 
 def ray_thickness(skin_V, skin_F, outer_V, outer_F, thickness: float, walls_F=None) -> dict:
     """SPEC thickness: rays from the skin vertices farther than `thickness` from the border, along the skin's
-    vertex normals, to the first hit on the outer face (outer_V (k,3), outer_F (j,3)); BVHTree ray casts.
+    vertex normals (eq. 3-2); each ray ends on the first surface it meets (BVHTree ray casts, up to RAY_MAX *
+    thickness): the outer face (outer_V (k,3), outer_F (j,3)), a rim or hole wall (walls_F (i,3) on outer_V, when
+    given: e.g. a nostril's channel) or the skin itself again, from SKIN_GAP_MM on (a valley the bolus bridges,
+    e.g. an eye socket: what lies beyond that is no longer bolus).
 
-    Returns rays, missed (no hit within RAY_MAX * thickness), min / mean / max over the hits (mm), thin (hits
-    below 0.95 t) and the (rays,) distances (inf where missed); with ``walls_F`` (i,3) (the rim and hole walls,
-    on outer_V) also on_wall: the missed rays that meet a wall within the reach (they leave the solid through a
-    wall, e.g. a nostril's channel, before any outer face) and wall_min, the shortest of those distances."""
+    Returns rays; outer, wall, skin, none: how many rays end on each (none: nothing within the reach); min / mean /
+    max (mm) and thin (below 0.95 t) over the rays that end on the outer face; wall_min: the shortest way to a
+    wall; distances (rays,) to the outer face (inf where a ray ends elsewhere)."""
     import numpy as np
     from mathutils import Vector
     from mathutils.bvhtree import BVHTree
@@ -228,25 +232,28 @@ def ray_thickness(skin_V, skin_F, outer_V, outer_F, thickness: float, walls_F=No
 
     N = MeshTopology(skin_V, skin_F).vertex_normals
     far = (border_distance(skin_V, skin_F) > thickness) & (np.linalg.norm(N, axis=1) > 0)
-    tree = BVHTree.FromPolygons(outer_V.tolist(), outer_F.tolist(), all_triangles=True)
+    meshes = {"outer": (outer_V, outer_F), "skin": (skin_V, skin_F)}
+    if walls_F is not None and len(walls_F):
+        meshes["wall"] = (outer_V, walls_F)
+    trees = {k: BVHTree.FromPolygons(np.asarray(v).tolist(), np.asarray(f).tolist(), all_triangles=True)
+             for k, (v, f) in meshes.items()}
     reach = RAY_MAX * thickness
-    d = np.full(int(far.sum()), np.inf)
+    kinds = ("outer", "wall", "skin", "none")
+    first = np.full(int(far.sum()), 3)
+    dist = np.full(int(far.sum()), np.inf)
     for k, (p, n) in enumerate(zip(skin_V[far], N[far])):
-        hit = tree.ray_cast(Vector(p), Vector(n), reach)
-        if hit[0] is not None:
-            d[k] = hit[3]
-    ok = np.isfinite(d)
-    out = {"rays": int(len(d)), "missed": int((~ok).sum()), "thin": int((d[ok] < 0.95 * thickness).sum()),
-           "min": None, "mean": None, "max": None, "on_wall": None, "wall_min": None, "distances": d}
-    if walls_F is not None:
-        dw = []
-        if (~ok).any() and len(walls_F):
-            wt = BVHTree.FromPolygons(outer_V.tolist(), np.asarray(walls_F).tolist(), all_triangles=True)
-            for p, n in zip(skin_V[far][~ok], N[far][~ok]):
-                hit = wt.ray_cast(Vector(p), Vector(n), reach)
-                if hit[0] is not None:
-                    dw.append(hit[3])
-        out.update(on_wall=len(dw), wall_min=float(min(dw)) if dw else None)
+        for c, name in enumerate(kinds[:3]):
+            if name not in trees:
+                continue
+            gap = SKIN_GAP_MM if name == "skin" else 0.0
+            hit = trees[name].ray_cast(Vector(p + gap * n), Vector(n), reach - gap)
+            if hit[0] is not None and hit[3] + gap < dist[k]:
+                first[k], dist[k] = c, hit[3] + gap
+    d = np.where(first == 0, dist, np.inf)
+    ok = first == 0
+    out = {"rays": int(len(d)), **{name: int((first == c).sum()) for c, name in enumerate(kinds)},
+           "thin": int((d[ok] < 0.95 * thickness).sum()), "min": None, "mean": None, "max": None,
+           "wall_min": float(dist[first == 1].min()) if (first == 1).any() else None, "distances": d}
     if ok.any():
         out.update(min=float(d[ok].min()), mean=float(d[ok].mean()), max=float(d[ok].max()))
     return out
@@ -604,13 +611,10 @@ def closed_text(rep: dict) -> str:
     return "no (" + ", ".join(bits) + " edges)" if bits else "no"
 
 
-def wall_text(th: dict, short: bool = False) -> str:
-    """The missed rays that leave through a rim or hole wall, and the shortest way to it ("" when none)."""
-    if not th.get("on_wall"):
-        return ""
-    if short:
-        return f" ({th['on_wall']} wall ≥ {th['wall_min']:.1f})"
-    return f": {th['on_wall']} of them leave through a rim or hole wall, after at least {th['wall_min']:.2f} mm"
+def ray_ends(th: dict) -> str:
+    """Where the thickness rays that do not end on the outer face end."""
+    wall = f"{th['wall']} on a wall" + (f" (from {th['wall_min']:.2f} mm)" if th.get("wall_min") else "")
+    return f"{th['skin']} on the skin again, {wall}, {th['none']} on nothing within {RAY_MAX * THICKNESS_MM:g} mm"
 
 
 def cpu_text(r: dict) -> str:
@@ -628,8 +632,9 @@ def print_run(r: dict, t: float) -> None:
     th = r["thickness"]
     print(f"   {r['method']}: {r['seconds']:.2f} s, peak +{mem_text(r)} MB, {r['triangles']} triangles, "
           f"closed {closed_text(r['closed'])}, volume {r['closed']['volume_mm3'] / 1000:.2f} cm³, thickness "
-          f"{_f(th['min'])} / {_f(th['mean'])} / {_f(th['max'])} mm on {th['rays']} rays ({th['thin']} below "
-          f"{0.95 * t:g} mm, {th['missed']} missed{wall_text(th)}), {r['self_intersections']} self-intersecting pairs"
+          f"{_f(th['min'])} / {_f(th['mean'])} / {_f(th['max'])} mm on the {th['outer']} of {th['rays']} rays that "
+          f"end on the outer face ({th['thin']} below {0.95 * t:g} mm; {ray_ends(th)}), {r['self_intersections']} "
+          "self-intersecting pairs"
           + (f", {r['folded']} folded of {r['offset_triangles']} offset triangles ({r['folded_far']} on skin "
              f"faces farther than {t:g} mm from the border)" if r.get("folded") is not None else ""))
     if r["self_intersections"]:
@@ -666,8 +671,8 @@ def shell_table(rows: list[dict], t: float) -> Table:
     tab = Table([("region", "<"), ("method", "<"), ("time s", ">"), ("cpu s", ">"), ("peak MB", ">"),
                  ("triangles", ">"),
                  ("closed", "<"), ("volume cm³", ">"), ("t min", ">"), ("t mean", ">"), ("t max", ">"),
-                 (f"rays < {0.95 * t:g} / missed", ">"), (f"folded (> {t:g} mm from border)", ">"),
-                 ("self-int. pairs", ">")])
+                 (f"< {0.95 * t:g} / rays", ">"), ("skin / wall / none", ">"),
+                 (f"folded (> {t:g} mm from border)", ">"), ("self-int. pairs", ">")])
     for row in rows:
         if "error" in row:
             tab.add_error(row["region"], row["error"])
@@ -681,7 +686,7 @@ def shell_table(rows: list[dict], t: float) -> Table:
             tab.add(first, r["method"], f"{r['seconds']:.2f}", cpu_text(r), mem_text(r), r["triangles"],
                     closed_text(r["closed"]),
                     f"{r['closed']['volume_mm3'] / 1000:.2f}", _f(th["min"]), _f(th["mean"]), _f(th["max"]),
-                    f"{th['thin']} / {th['missed']}{wall_text(th, short=True)} of {th['rays']}",
+                    f"{th['thin']} / {th['rays']}", f"{th['skin']} / {th['wall']} / {th['none']}",
                     "n/a" if r.get("folded") is None
                     else f"{r['folded']} ({r['folded_far']}) of {r['offset_triangles']}",
                     r["self_intersections"])
@@ -738,11 +743,13 @@ def legend() -> str:
             "RSS before it. Closed: every edge has two faces with opposite directions "
             "(`core.solid.closed_report`). Thickness "
             f"(SPEC, one measure for both): rays from the skin vertices farther than {THICKNESS_MM:g} mm from the "
-            "region's border, along the skin's vertex normal, to the first hit on the outer face (ours: "
-            "`SIDE_OUTER` faces; Solidify: its offset layer), `BVHTree.ray_cast`; missed = no hit within "
-            f"{RAY_MAX:g} t (in brackets: how many of those leave through a rim or hole wall, and the shortest way "
-            "there). Folded: offset-layer triangles whose normal turned against their source face's (in "
-            f"brackets: those whose source face lies farther than {THICKNESS_MM:g} mm from the border). "
+            "region's border, along the skin's vertex normal, each ending on the first surface it meets "
+            "(`BVHTree.ray_cast`): the outer face (ours: `SIDE_OUTER` faces; Solidify: its offset layer), a rim or "
+            "hole wall, the skin again (a valley the bolus bridges, e.g. an eye socket) or nothing within "
+            f"{RAY_MAX * THICKNESS_MM:g} mm; t min / mean / max over the rays that end on the outer face, "
+            f"< {0.95 * THICKNESS_MM:g}: how many of those are thinner than that, rays: all rays cast; skin / wall "
+            "/ none: where the others end. Folded: offset-layer triangles whose normal turned against their source "
+            f"face's (in brackets: those whose source face lies farther than {THICKNESS_MM:g} mm from the border). "
             "Self-intersecting pairs: `BVHTree.overlap` of the solid with itself, pairs sharing a vertex (a position) "
             "left out")
 

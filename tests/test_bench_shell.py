@@ -58,26 +58,46 @@ def test_ray_thickness_between_parallel_sheets(sb, bpy):
     V, F, W = shifted_sheet(lambda x, y: np.full_like(x, T))
     r = sb.ray_thickness(V, F, W, F, T)
     inner = (np.minimum.reduce([V[:, 0], V[:, 1], 100 - V[:, 0], 100 - V[:, 1]]) > T + 1e-9).sum()
-    assert r["rays"] == inner == 15 * 15  # grid step 5 mm: 10 < x < 90 -> 15 vertices
-    assert r["missed"] == 0 and r["thin"] == 0
+    assert r["rays"] == r["outer"] == inner == 15 * 15  # grid step 5 mm: 10 < x < 90 -> 15 vertices
+    assert r["thin"] == r["skin"] == r["wall"] == r["none"] == 0
     assert r["min"] == pytest.approx(T, abs=1e-4) and r["max"] == pytest.approx(T, abs=1e-4)
 
 
 @pytest.mark.blender
-def test_ray_thickness_finds_a_thin_spot_and_a_miss(sb, bpy):
-    """A dent in the outer sheet is measured (its depth), a hole in it is a miss, not a thickness."""
+def test_ray_thickness_finds_a_thin_spot_and_a_hole(sb, bpy):
+    """A dent in the outer sheet is measured (its depth); a ray through a hole in it ends on nothing, or on the
+    wall given for the hole, and is not a thickness."""
     V, F, W = shifted_sheet(lambda x, y: T - 4.0 * np.exp(-((x - 50) ** 2 + (y - 50) ** 2) / 50.0))
     r = sb.ray_thickness(V, F, W, F, T)
     assert r["min"] == pytest.approx(T - 4.0, abs=1e-4) and r["max"] == pytest.approx(T, abs=1e-3)
-    assert r["thin"] >= 1 and r["missed"] == 0
+    assert r["thin"] >= 1 and r["outer"] == r["rays"]
     far = np.linalg.norm(W[F].mean(axis=1)[:, :2] - [30.0, 30.0], axis=1) > 8.0  # a hole around (30, 30)
     r2 = sb.ray_thickness(V, F, W, F[far], T)
-    assert r2["missed"] >= 1 and r2["rays"] == r["rays"]
-    assert np.isinf(r2["distances"]).sum() == r2["missed"] and r2["on_wall"] is None
-    # the faces cut out, given as a wall: every missed ray meets it, 10 mm up
+    assert r2["none"] >= 1 and r2["rays"] == r["rays"] == r2["outer"] + r2["none"]
+    assert np.isinf(r2["distances"]).sum() == r2["none"] and r2["wall"] == 0 and r2["wall_min"] is None
+    # the faces cut out, given as a wall: every ray through the hole meets it, 10 mm up
     r3 = sb.ray_thickness(V, F, W, F[far], T, walls_F=F[~far])
-    assert r3["on_wall"] == r3["missed"] == r2["missed"] and r3["wall_min"] == pytest.approx(T, abs=1e-4)
-    assert sb.ray_thickness(V, F, W, F, T, walls_F=F[~far])["on_wall"] == 0  # no miss, nothing to classify
+    assert r3["wall"] == r2["none"] and r3["none"] == 0 and r3["wall_min"] == pytest.approx(T, abs=1e-4)
+    assert r3["min"] == r2["min"] and r3["outer"] == r2["outer"]
+
+
+@pytest.mark.blender
+def test_ray_thickness_stops_at_the_skin_again(sb, bpy):
+    """A flap of skin 5 mm over the sheet (a valley the bolus bridges): the rays between the two end on the skin,
+    not on the outer face 10 mm up, and are not thicknesses."""
+    V, F, W = shifted_sheet(lambda x, y: np.full_like(x, T))
+    Vf, Ff = meshgen.grid(8, 8, 40.0)
+    Vf = Vf + [30.0, 30.0, 5.0]
+    if np.cross(Vf[Ff[0, 1]] - Vf[Ff[0, 0]], Vf[Ff[0, 2]] - Vf[Ff[0, 0]])[2] > 0:
+        Ff = Ff[:, ::-1]  # the flap faces down, onto the sheet
+    S, SF = np.vstack([V, Vf]), np.vstack([F, Ff + len(V)])
+    r = sb.ray_thickness(S, SF, W, F, T)
+    inset = 20.0 - np.abs(V[:, :2] - 50.0).max(axis=1)  # how far inside the flap's outline, seen from above
+    under = ((inset > 0) & (inset ** 2 + 5.0 ** 2 > T ** 2 + 1e-9)).sum()  # > 10 mm from the flap's border
+    flap = (np.abs(Vf[:, :2] - 50.0) < 10.0 - 1e-9).all(axis=1).sum()
+    assert (under, flap) == (25, 9)
+    assert r["skin"] == under + flap > 0 and r["outer"] == r["rays"] - r["skin"] and r["none"] == 0
+    assert r["min"] == pytest.approx(T, abs=1e-4) and np.isinf(r["distances"]).sum() == r["skin"]
 
 
 def test_border_distance_counts_hole_loops(sb):
@@ -131,7 +151,7 @@ def test_solidify_on_a_convex_cap(sb, bpy):
     assert m["closed"]["volume_mm3"] == pytest.approx(
         2 * np.pi / 3 * (70.0 ** 3 - 60.0 ** 3) * (1 - np.cos(np.radians(60))), rel=0.08)
     th = m["thickness"]
-    assert th["rays"] > 50 and th["missed"] == 0 and 9.9 < th["min"] <= th["max"] < 10.3
+    assert th["rays"] > 50 and th["outer"] == th["rays"] and 9.9 < th["min"] <= th["max"] < 10.3
     assert sb.folded_triangles(r["V"], r["F"][off], r["src"][off], V, F) == 0
 
 
@@ -147,7 +167,8 @@ def test_solidify_folds_in_a_tight_bowl(sb, bpy):
 
 
 def fake_rows():
-    th = {"rays": 100, "missed": 1, "thin": 2, "min": 9.5, "mean": 10.0, "max": 10.5, "on_wall": 1, "wall_min": 8.76}
+    th = {"rays": 100, "outer": 95, "skin": 3, "wall": 1, "none": 1, "thin": 2, "min": 9.5, "mean": 10.0, "max": 10.5,
+          "wall_min": 8.76}
     rep = {"closed": False, "boundary_edges": 3, "nonmanifold_edges": 0, "inconsistent_edges": 0,
            "volume_mm3": 12345.0}
     run = {"method": "ours 1 mm", "seconds": 1.0, "cpu_seconds": 1.5, "peak_mb": 300.0, "peak_delta_mb": 50.0,
@@ -168,7 +189,7 @@ def test_tables_keep_their_columns(sb):
     rows = fake_rows()
     md = sb.shell_table(rows, T).markdown().splitlines()
     assert len({line.count("|") for line in md}) == 1
-    assert "| no (3 boundary edges) |" in md[3] and "| 4 (1) of 8 |" in md[3] and "| 2 / 1 (1 wall ≥ 8.8) of 100 |" in md[2]
+    assert "| no (3 boundary edges) |" in md[3] and "| 4 (1) of 8 |" in md[3] and "| 2 / 100 | 3 / 1 / 1 |" in md[2]
     assert any("ERROR: E: no" in line for line in md) and any("ERROR: ValueError: bad" in line for line in md)
     pt = sb.parts_table(rows).markdown().splitlines()
     assert len({line.count("|") for line in pt}) == 1
@@ -215,7 +236,7 @@ def test_bench_region_smoke_run(sb, bpy, tmp_path):
         assert r["seconds"] > 0 and r["peak_mb"] > 0 and r["triangles"] > 0
         assert r["closed"]["closed"] and r["self_intersections"] == 0
         th = r["thickness"]
-        assert th["rays"] > 20 and th["missed"] == 0 and 9.5 < th["min"] <= th["mean"] <= th["max"] < 10.6
+        assert th["rays"] > 20 and th["outer"] == th["rays"] and 9.5 < th["min"] <= th["mean"] <= th["max"] < 10.6
     ours = row["runs"][0]
     assert ours["volume_mm3"] == pytest.approx(ours["closed"]["volume_mm3"], rel=1e-6)
     assert ours["closed"]["volume_mm3"] == pytest.approx(row["runs"][1]["closed"]["volume_mm3"], rel=0.03)
