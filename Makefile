@@ -83,8 +83,8 @@ test-core: $(VENV)/.installed
 
 # docs/benchmarks.md is written fresh (a header with the date, machine and versions), then every
 # script appends its tables; each runs even when an earlier one failed, the target fails if any did.
-# `make bench BENCH_ARGS=--quick` passes options to all four (unfold_bench.py also takes --only NAME).
-# The full run takes about 20 minutes on 2 quiet cores (the unfold benchmark 12 of them).
+# `make bench BENCH_ARGS=--quick` passes options to all five (unfold_bench and shell_bench also take --only NAME).
+# The full run takes about 30 minutes on 2 cores (the unfold benchmark 12 of them, the shell one about 11).
 BENCH_MD ?= docs/benchmarks.md
 BENCH_ARGS ?=
 bench: $(VENV)/.installed
