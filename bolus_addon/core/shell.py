@@ -226,47 +226,33 @@ def _field_coarse_to_fine(skin, grid, lattice, t, c, rim_cap, band, coarse, prog
         d2.append(np.stack([(fr * sp[a]) ** 2, ((2.0 - fr) * sp[a]) ** 2]))  # (2, n): corner 0 / 1
     padded = np.full(tuple(x + 2 for x in shape), -1.0)  # one layer of -1 around: see _level_set_fast
     out = padded[1:-1, 1:-1, 1:-1]
-    # whole coarse cells beyond the outer face (every corner's t - |sd| plus the cell diagonal
-    # below -spm) are settled at once: most of a big box
-    diag = 2.0 * float(np.linalg.norm(sp))
-    hmax = hi_ud[:-1, :-1, :-1].copy()
-    for dx in (0, 1):
-        for dy in (0, 1):
-            for dz in (0, 1):
-                np.maximum(hmax, hi_ud[dx:dx + hmax.shape[0], dy:dy + hmax.shape[1], dz:dz + hmax.shape[2]], out=hmax)
-    cell_val = hmax + diag
     slab = max(1, int(1_000_000 // max(shape[1] * shape[2], 1)))
     n_exact = 0
     for i0 in range(0, shape[0], slab):
         i1 = min(shape[0], i0 + slab)
-        vals = cell_val[np.ix_(mm[0][i0:i1], mm[1], mm[2])]
-        open_ = vals >= -spm
-        if open_.any():
-            ii, jj, kk = np.nonzero(open_)
-            a_, b_, c_ = mm[0][i0 + ii], mm[1][jj], mm[2][kk]
-            L = np.full(len(ii), -np.inf)
-            U = np.full(len(ii), np.inf)
-            R = np.full(len(ii), np.inf)
-            Ud = np.full(len(ii), np.inf)
-            for dx in (0, 1):
-                for dy in (0, 1):
-                    for dz in (0, 1):
-                        ix = (a_ + dx, b_ + dy, c_ + dz)
-                        dist = np.sqrt(d2[0][dx, i0 + ii] + d2[1][dy, jj] + d2[2][dz, kk])
-                        np.maximum(L, lo_ab[ix] - dist, out=L)
-                        np.minimum(U, hi_ab[ix] + dist, out=U)
-                        np.minimum(R, rc[ix], out=R)
-                        np.minimum(Ud, hi_ud[ix] + dist, out=Ud)
-            far_rim = R >= 8.0 * spm - 1e-9
-            pos = (L > spm) & far_rim
-            neg = ((U < -spm) & far_rim) | (Ud < -spm)
-            v = np.where(pos, np.minimum(L, rim_cap), np.minimum(np.where(far_rim, U, np.inf), Ud))
-            exact = ~(pos | neg)
-            if exact.any():
-                P = np.stack([ax[0][i0 + ii[exact]], ax[1][jj[exact]], ax[2][kk[exact]]], axis=1)
-                v[exact] = skin.field(P, t, c, rim_cap)
-                n_exact += len(P)
-            vals[ii, jj, kk] = v
+        L = np.full((i1 - i0, shape[1], shape[2]), -np.inf)
+        U = np.full((i1 - i0, shape[1], shape[2]), np.inf)
+        R = np.full((i1 - i0, shape[1], shape[2]), np.inf)
+        Ud = np.full((i1 - i0, shape[1], shape[2]), np.inf)
+        for dx in (0, 1):
+            for dy in (0, 1):
+                for dz in (0, 1):
+                    ix = np.ix_(mm[0][i0:i1] + dx, mm[1] + dy, mm[2] + dz)
+                    dist = np.sqrt(d2[0][dx, i0:i1][:, None, None] + d2[1][dy][None, :, None] + d2[2][dz][None, None, :])
+                    np.maximum(L, lo_ab[ix] - dist, out=L)
+                    np.minimum(U, hi_ab[ix] + dist, out=U)
+                    np.minimum(R, rc[ix], out=R)
+                    np.minimum(Ud, hi_ud[ix] + dist, out=Ud)
+        far_rim = R >= 8.0 * spm - 1e-9
+        pos = (L > spm) & far_rim
+        neg = ((U < -spm) & far_rim) | (Ud < -spm)
+        vals = np.where(pos, np.minimum(L, rim_cap), np.minimum(np.where(far_rim, U, np.inf), Ud))
+        exact = ~(pos | neg)
+        if exact.any():
+            ii, jj, kk = np.nonzero(exact)
+            P = np.stack([ax[0][i0 + ii], ax[1][jj], ax[2][kk]], axis=1)
+            vals[exact] = skin.field(P, t, c, rim_cap)
+            n_exact += len(P)
         out[i0:i1] = vals
         _progress(progress, p0 + (p1 - p0) * i1 / shape[0], "distance field")
     return padded, n_exact
