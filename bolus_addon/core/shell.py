@@ -17,12 +17,24 @@ open surface, and its Manifold boolean is 5.0+).
 Holes of the region (every border loop but the outer one) get the rim wall in the field and,
 because the level set bridges a hole narrower than about two voxels or covered by the
 offsets of its bulging sides (lips), a cutter: the hole's membrane (its loop triangulated in
-the best-fit plane) swept along each border vertex's own normal, built as a union of convex
-hulls (valid even where the normals converge) and subtracted with a manifold boolean.
-Crumbs left by the cut (components far below the shell's volume) are dropped.
+the best-fit plane) swept from t below to 2t above the skin along each border vertex's
+channel direction (the mean skin normal within t of it: the lips' own border normals point
+at each other), built as a union of convex hulls (valid even where the directions converge)
+and subtracted with a manifold boolean.  A prism along the loop's mean normal (the spike's
+first try) cut a nose apart when the loop was far from planar.  Pieces below 2 % of the
+largest one's volume (crumbs of the cut) are dropped, and the arrays are read back until
+stable (manifold3d collapses coincident level-set vertices on reading).
+
+Speed: the field is exact only where it decides the surface (a coarse lattice and Lipschitz
+bounds settle the rest); the level set's Python callback (about 1-1.5 us for each of the
+2 x box / res^3 lattice points) is the floor.  Nose region of the example face (7,000 mm^2)
+at 0.5 mm: about 40 s, 0.46 GB; 1.0 mm: about 12 s.
 
 Limits: the inner face is the skin resampled at the resolution (a sharp crease is rounded by
-up to about one voxel at 1 mm); cavities left in the region (nostril pockets) are filled.
+up to about one voxel at 1 mm); cavities left in the region (nostril pockets) and valleys
+narrower than 2 t (beside the nose) are filled; a hole's corners narrower than a voxel (the
+mouth's) can leave a tiny tunnel (the example nose region at 0.5 mm has genus 2 where its one
+mouth hole gives 1).
 """
 from __future__ import annotations
 
