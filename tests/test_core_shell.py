@@ -365,3 +365,18 @@ def test_fast_lookup_matches_the_checked_lookup():
     V2, F2 = from_manifold(S._level_set_fast(g, f0, f1))
     assert misses == 0 and len(F1) > 1000
     assert np.array_equal(V1, V2) and np.array_equal(F1, F2)
+
+
+def test_solid_touching_the_first_box_is_built_again_on_the_full_box(monkeypatch):
+    """The level set first runs in the skin's box swept along its normals; a solid that touches
+    that box (cut flat by it) is rebuilt on the full box: same solid as the full box gives."""
+    import bolus_addon.core.shell as S
+
+    V, F = hemisphere(30.0, nlat=8, na=24)
+    ref = make_shell(V, F, 6.0, 0.0, 1.5)
+    assert "box_retry" not in ref.stats
+    monkeypatch.setattr(S, "_tight_box", lambda skin, t, res: (skin.V.min(axis=0), skin.V.max(axis=0)))
+    sh = make_shell(V, F, 6.0, 0.0, 1.5)
+    assert sh.stats.get("box_retry") is True
+    assert sh.volume_mm3 == pytest.approx(ref.volume_mm3, rel=1e-3)
+    assert closed_report(sh.V, sh.F)["closed"]

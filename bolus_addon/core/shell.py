@@ -481,6 +481,38 @@ def _fmt(p):
     return "(" + ", ".join(f"{x:.1f}" for x in p) + ") mm"
 
 
+def _tight_box(skin, t, res):
+    """(lo, hi) (3,): box of the skin and of its vertices and triangle corners moved by t along
+    their vertex / face normals, grown by 3 voxels."""
+    P = np.concatenate([skin.V, skin.V + t * skin.vn] + [skin.V[skin.F[:, j]] + t * skin.fn for j in range(3)])
+    return P.min(axis=0) - 3 * res, P.max(axis=0) + 3 * res
+
+
+def _solid_on_grid(skin, grid, t, c, progress, stats):
+    """The field on the grid's two lattices and its level set (a Manifold)."""
+    T0 = time.process_time()
+    rim_cap = 3.0 * float(grid.sp.max())
+    band = t + 3.0 * float(grid.sp.max()) + skin.tri_rmax
+    coarse = _coarse_terms(skin, grid, t, c, band)
+    f0, n0 = _field_coarse_to_fine(skin, grid, 0, t, c, rim_cap, band, coarse, progress, 0.05, 0.30)
+    f1, n1 = _field_coarse_to_fine(skin, grid, 1, t, c, rim_cap, band, coarse, progress, 0.30, 0.55)
+    del coarse
+    stats["exact_points"] = stats.get("exact_points", 0) + n0 + n1
+    stats["grid_points"] = stats.get("grid_points", 0) + grid.points
+    if not (np.max(f0, initial=-1.0) > 0 or np.max(f1, initial=-1.0) > 0):
+        raise BolusError("the region is too small for this resolution: no voxel lies inside the shell; choose a "
+                         "finer resolution or a larger region")
+    stats["field_s"] = stats.get("field_s", 0.0) + time.process_time() - T0
+    _progress(progress, 0.55, "level set")
+    T1 = time.process_time()
+    M = _level_set_fast(grid, f0, f1)
+    del f0, f1
+    stats["level_set_s"] = stats.get("level_set_s", 0.0) + time.process_time() - T1
+    if str(M.status()).split(".")[-1] != "NoError" or M.is_empty():
+        raise BolusError(f"the volume step failed (manifold3d level set: {M.status()}); try a coarser resolution")
+    return M
+
+
 # ---------------------------------------------------------------------------- make_shell
 def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=None, progress=None) -> Shell:
     """A closed bolus solid on the skin region V (n,3) mm, F (m,3) (an open surface whose face
@@ -512,26 +544,22 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     _check_region(skin)
     warnings: list[str] = []
 
-    rim_cap = 3.0 * float(grid.sp.max())
-    band = t + 3.0 * float(grid.sp.max()) + skin.tri_rmax
-    coarse = _coarse_terms(skin, grid, t, c, band)
-    f0, n0 = _field_coarse_to_fine(skin, grid, 0, t, c, rim_cap, band, coarse, progress, 0.05, 0.30)
-    f1, n1 = _field_coarse_to_fine(skin, grid, 1, t, c, rim_cap, band, coarse, progress, 0.30, 0.55)
-    del coarse
-    stats["exact_points"] = n0 + n1
-    stats["grid_points"] = grid.points
-    if not (np.max(f0, initial=-1.0) > 0 or np.max(f1, initial=-1.0) > 0):
-        raise BolusError("the region is too small for this resolution: no voxel lies inside the shell; choose a "
-                         "finer resolution or a larger region")
-    stats["field_s"] = time.process_time() - T0
-    _progress(progress, 0.55, "level set")
-    T1 = time.process_time()
-    M = _level_set_fast(grid, f0, f1)
-    del f0, f1
-    stats["level_set_s"] = time.process_time() - T1
-    if str(M.status()).split(".")[-1] != "NoError" or M.is_empty():
-        raise BolusError(f"the volume step failed (manifold3d level set: {M.status()}); try a coarser resolution")
+    # first a box around the skin swept along its normals (the shell lies within it unless a
+    # crease's normal cone reaches farther out): about a third fewer grid points on a face;
+    # if the solid touches that box, again on the full box (the region's box grown by t)
+    lo, hi = _tight_box(skin, t, res)
+    for attempt in (0, 1):
+        if attempt:
+            grid = _Grid(V.min(axis=0) - pad, V.max(axis=0) + pad, res)
+            stats["box_retry"] = True
+        else:
+            grid = _Grid(np.maximum(lo, V.min(axis=0) - pad), np.minimum(hi, V.max(axis=0) + pad), res)
+        M = _solid_on_grid(skin, grid, t, c, progress, stats)
+        bb = np.asarray(M.bounding_box()).reshape(2, 3)
+        if attempt or (np.all(bb[0] - grid.lo > grid.res) and np.all(grid.hi - bb[1] > grid.res)):
+            break
 
+    T1 = time.process_time()
     holes = skin.loops[1:]
     if holes:
         _progress(progress, 0.75, f"holes ({len(holes)})")
@@ -555,7 +583,7 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
             raise BolusError(f"cutting the holes through the shell failed (manifold3d: {M.status()})")
 
     T2 = time.process_time()
-    stats["holes_s"] = T2 - T1 - stats["level_set_s"]
+    stats["holes_s"] = T2 - T1
     _progress(progress, 0.82, "cleaning up")
     M, Vo, Fo, dropped, pieces = _clean(M)
     if dropped:
