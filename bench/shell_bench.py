@@ -223,7 +223,8 @@ def ray_thickness(skin_V, skin_F, outer_V, outer_F, thickness: float, walls_F=No
 
     Returns rays; outer, wall, skin, none: how many rays end on each (none: nothing within the reach); min / mean /
     max (mm) and thin (below 0.95 t) over the rays that end on the outer face; wall_min: the shortest way to a
-    wall; distances (rays,) to the outer face (inf where a ray ends elsewhere)."""
+    wall, wall_thin: the rays that meet a wall before 0.95 t; distances (rays,) to the outer face (inf where a
+    ray ends elsewhere)."""
     import numpy as np
     from mathutils import Vector
     from mathutils.bvhtree import BVHTree
@@ -253,7 +254,8 @@ def ray_thickness(skin_V, skin_F, outer_V, outer_F, thickness: float, walls_F=No
     ok = first == 0
     out = {"rays": int(len(d)), **{name: int((first == c).sum()) for c, name in enumerate(kinds)},
            "thin": int((d[ok] < 0.95 * thickness).sum()), "min": None, "mean": None, "max": None,
-           "wall_min": float(dist[first == 1].min()) if (first == 1).any() else None, "distances": d}
+           "wall_min": float(dist[first == 1].min()) if (first == 1).any() else None,
+           "wall_thin": int((dist[first == 1] < 0.95 * thickness).sum()), "distances": d}
     if ok.any():
         out.update(min=float(d[ok].min()), mean=float(d[ok].mean()), max=float(d[ok].max()))
     return out
@@ -728,8 +730,12 @@ def target_lines(rows: list[dict]) -> list[str]:
             continue
         sound = sum(r["closed"]["closed"] and r["self_intersections"] == 0 for r in sel)
         thick = sum(r["thickness"]["min"] is not None and r["thickness"]["min"] >= 0.95 * THICKNESS_MM for r in sel)
+        walls = [f"{g} {r['method']}: {r['thickness']['wall_thin']}" for g, r in runs
+                 if pick(r["method"]) and r["thickness"].get("wall_thin")]
         out.append(f"{label}: closed without self-intersection in {sound} of {len(sel)} runs; minimum thickness >= "
-                   f"{0.95 * THICKNESS_MM:g} mm in {thick} of {len(sel)}.")
+                   f"{0.95 * THICKNESS_MM:g} mm in {thick} of {len(sel)}"
+                   + (f" (rays that meet a rim or hole wall before {0.95 * THICKNESS_MM:g} mm: " + ", ".join(walls)
+                      + ")" if walls else "") + ".")
     return out
 
 

@@ -78,6 +78,7 @@ def test_ray_thickness_finds_a_thin_spot_and_a_hole(sb, bpy):
     # the faces cut out, given as a wall: every ray through the hole meets it, 10 mm up
     r3 = sb.ray_thickness(V, F, W, F[far], T, walls_F=F[~far])
     assert r3["wall"] == r2["none"] and r3["none"] == 0 and r3["wall_min"] == pytest.approx(T, abs=1e-4)
+    assert r3["wall_thin"] == 0 and sb.ray_thickness(V, F, W, F[far], 1.1 * T, walls_F=F[~far])["wall_thin"] >= 1
     assert r3["min"] == r2["min"] and r3["outer"] == r2["outer"]
 
 
@@ -168,7 +169,7 @@ def test_solidify_folds_in_a_tight_bowl(sb, bpy):
 
 def fake_rows():
     th = {"rays": 100, "outer": 95, "skin": 3, "wall": 1, "none": 1, "thin": 2, "min": 9.5, "mean": 10.0, "max": 10.5,
-          "wall_min": 8.76}
+          "wall_min": 8.76, "wall_thin": 1}
     rep = {"closed": False, "boundary_edges": 3, "nonmanifold_edges": 0, "inconsistent_edges": 0,
            "volume_mm3": 12345.0}
     run = {"method": "ours 1 mm", "seconds": 1.0, "cpu_seconds": 1.5, "peak_mb": 300.0, "peak_delta_mb": 50.0,
@@ -210,7 +211,8 @@ def test_target_lines(sb):
     rows[0]["runs"][0]["method"] = "ours 0.5 mm"
     lines = sb.target_lines(rows)
     assert lines[0].startswith("make_shell under 30 s at 0.5 mm: 1 of 1 regions (r 1 s, cpu 2 s)")
-    assert lines[1] == "ours: closed without self-intersection in 1 of 1 runs; minimum thickness >= 9.5 mm in 1 of 1."
+    assert lines[1] == ("ours: closed without self-intersection in 1 of 1 runs; minimum thickness >= 9.5 mm in 1 of 1 "
+                        "(rays that meet a rim or hole wall before 9.5 mm: r ours 0.5 mm: 1).")
     assert lines[2].startswith("Solidify: closed without self-intersection in 0 of 1 runs")
 
 
