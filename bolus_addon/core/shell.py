@@ -27,8 +27,9 @@ stable (manifold3d collapses coincident level-set vertices on reading).
 
 Speed: the field is exact only where it decides the surface (a coarse lattice and Lipschitz
 bounds settle the rest); the level set's Python callback (about 1-1.5 us for each of the
-2 x box / res^3 lattice points) is the floor.  Nose region of the example face (7,000 mm^2)
-at 0.5 mm: about 40 s, 0.46 GB; 1.0 mm: about 12 s.
+2 x box / res^3 lattice points, the box being the skin swept t along its normals) is the
+floor.  Nose region of the example face (3,800 triangles, 7,000 mm^2) at 0.5 mm: about 28 s,
+0.46 GB; at 1.0 mm about 7 s (2 cores, shared machine).
 
 Limits: the inner face is the skin resampled at the resolution (a sharp crease is rounded by
 up to about one voxel at 1 mm); cavities left in the region (nostril pockets) and valleys
