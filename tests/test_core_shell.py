@@ -380,3 +380,24 @@ def test_solid_touching_the_first_box_is_built_again_on_the_full_box(monkeypatch
     assert sh.stats.get("box_retry") is True
     assert sh.volume_mm3 == pytest.approx(ref.volume_mm3, rel=1e-3)
     assert closed_report(sh.V, sh.F)["closed"]
+
+
+def dome_band(R=12.0, top_deg=35.0):
+    """Hemisphere R (rim at z = 0) with the faces above polar angle top_deg removed: the cut
+    follows whole faces, so the top border zigzags and is longer than the rim."""
+    V, F = hemisphere(R, nlat=12, na=48)
+    keep = V[F].mean(axis=1)[:, 2] < R * np.cos(np.radians(top_deg))
+    from bolus_addon.core.topology import submesh
+    Fk, ids = submesh(F, keep)
+    return V[ids], Fk
+
+
+def test_outer_loop_is_the_one_enclosing_most_area():
+    """Regression: the outer border was taken as the longest loop; a dome band's zigzag top
+    (96 vertices, longer than the 48-vertex rim) became the outer border and the rim a 'hole'
+    that the cutter carved away (H5's dome: 37 mm^3 removed)."""
+    V, F = dome_band()
+    skin = SkinDistance(V, F)
+    assert len(skin.loops) == 2
+    assert np.abs(V[skin.loops[0], 2]).max() < 1e-9            # the rim at z = 0 is the outer loop
+    assert skin.loop_lengths[1] > skin.loop_lengths[0]           # although the top is longer

@@ -91,7 +91,7 @@ class SkinDistance:
 
     V (n,3), F (m,3) an open, consistently wound, non-degenerate region (checked by the
     caller).  Attributes: vn (n,3) unit area-weighted vertex normals, loops (list of border
-    vertex loops, outer one first: the longest), rim_tree (KD-tree of border samples every
+    vertex loops, outer one first: the one enclosing the most area along the mean normal), rim_tree (KD-tree of border samples every
     0.05 mm), rmax (largest sub-triangle radius), area (float mm^2).
     """
 
@@ -131,9 +131,15 @@ class SkinDistance:
         self.border_edges = topo.edges[topo.boundary_edges]
         loops = boundary_loops(F, topo)
         lengths = [float(np.linalg.norm(V[lp] - V[np.roll(lp, -1)], axis=1).sum()) for lp in loops]
-        order = np.argsort(lengths)[::-1]
+        # the outer loop encloses the most area seen along the region's mean normal (the
+        # longest loop is not it where a border zigzags along whole faces: a dome's cut top)
+        mean_n = fn.sum(axis=0)
+        mean_n = mean_n / max(float(np.linalg.norm(mean_n)), 1e-300)
+        enclosed = [abs(float(np.cross(V[lp], V[np.roll(lp, -1)]).sum(axis=0) @ mean_n)) / 2 for lp in loops]
+        order = sorted(range(len(loops)), key=lambda i: (enclosed[i], lengths[i]), reverse=True)
         self.loops = [loops[i] for i in order]
         self.loop_lengths = [lengths[i] for i in order]
+        self.loop_areas = [enclosed[i] for i in order]
         if len(self.border_edges):
             P, Q = V[self.border_edges[:, 0]], V[self.border_edges[:, 1]]
             n = np.maximum(2, np.ceil(np.linalg.norm(Q - P, axis=1) / 0.05).astype(int) + 1)

@@ -522,8 +522,9 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     thickness: outer face at this true distance (mm) from the skin; clearance: inner face at
     this distance (mm, 0 = on the skin); resolution: voxel size (mm) of the level set.
     others: (V2 (k,3), F2 (j,3)) the rest of the skin or None: `BolusError` naming the spot if
-    the shell would run into it.  Every border loop but the outer (longest) one is a hole,
-    kept open through the solid.  Returns a `Shell`.
+    the shell would run into it.  Every border loop but the outer one (enclosing the most area
+    seen along the region's mean normal) is a hole, kept open through the solid.  Returns a
+    `Shell`.
     """
     check_shell_request(thickness, clearance, resolution)
     t, c, res = float(thickness), float(clearance), float(resolution)
