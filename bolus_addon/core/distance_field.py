@@ -9,8 +9,9 @@ The shell is the set where
   pseudo-normal of the foot's feature (Baerentzen & Aanaes 2005: the face normal inside a face,
   the sum of the two face normals on an edge, the angle-weighted normal at a vertex), which is
   the correct side wherever the skin is locally watertight (an interpolated vertex normal is
-  not: it flipped the sign at the folded mouth corners of the example face).  True distance, not a normal push: the offset surface {sd = t} cannot fold in
-  concave spots (sides of the nose, eye sockets), where a per-vertex push self-intersects.
+  not: it flipped the sign at the folded mouth corners of the example face).  True distance,
+  not a normal push: the offset surface {sd = t} cannot fold in concave spots (sides of the
+  nose, eye sockets), where a per-vertex push self-intersects.
 * ``c`` the clearance (inner face), ``t`` the thickness (outer face), both from the skin.
 * ``r`` closes the rim: where the foot point lies ON a border edge or border vertex of the
   region (decided exactly from the barycentric coordinates), r = -(lateral distance of x from
@@ -91,8 +92,9 @@ class SkinDistance:
 
     V (n,3), F (m,3) an open, consistently wound, non-degenerate region (checked by the
     caller).  Attributes: vn (n,3) unit area-weighted vertex normals, loops (list of border
-    vertex loops, outer one first: the one enclosing the most area along the mean normal), rim_tree (KD-tree of border samples every
-    0.05 mm), rmax (largest sub-triangle radius), area (float mm^2).
+    vertex loops, outer one first: the one enclosing the most area along the mean normal),
+    rim_tree (KD-tree of border samples every 0.05 mm), rmax (largest sub-triangle radius),
+    area (float mm^2).
     """
 
     def __init__(self, V, F, sub_radius: float = 1.0):
@@ -169,7 +171,8 @@ class SkinDistance:
             bc = np.array(bc)
             u, v = bc[:, 0], bc[:, 1]
             w = 1 - u - v
-            P = A[sel][:, None] * w[None, :, None] + B[sel][:, None] * u[None, :, None] + C[sel][:, None] * v[None, :, None]
+            P = (A[sel][:, None] * w[None, :, None] + B[sel][:, None] * u[None, :, None]
+                 + C[sel][:, None] * v[None, :, None])
             pts.append(P.reshape(-1, 3))
             owner.append(np.repeat(sel, len(bc)))
             radii.append(np.repeat(rad[sel] / k, len(bc)) * 1.0001)

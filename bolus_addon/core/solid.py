@@ -136,7 +136,8 @@ def ray_thickness(V, F, origins, directions, max_mm, *, manifold=None, min_mm: f
     of the closed solid V, F hit beyond ``min_mm`` (1e-3 mm), inf where none within ``max_mm``.
 
     Uses ``Manifold.ray_cast`` (BVH; its RayHit.distance is a fraction of the segment, turned
-    into mm here), along the ray in pieces of about 2 mm.  ``manifold``: the solid already as a Manifold (skips the conversion).
+    into mm here), along the ray in pieces of about 2 mm.  ``manifold``: the solid already as a
+    Manifold (skips the conversion).
     With ``return_points`` also returns the hit points (k,3) (NaN where none).  (RayHit.face_id
     is manifold's own face numbering, not an index into F, so hits are located by position.)"""
     M = manifold if manifold is not None else to_manifold(V, F)
