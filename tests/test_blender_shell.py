@@ -227,8 +227,13 @@ def test_edit_mode_region(bpy_addon, scene):
     assert closed_and_consistent(Tb)[0]
     side = face_attr(bolus.data, "bolus_shell_side")[tpb]
     inner = Vb[np.unique(Tb[side == 0])]
-    # the inner face covers the selected polar cap only (its lowest ring at about 50 degrees)
-    rim_z = min(V[list(ob.data.polygons[i].vertices)][:, 2].min() for i in np.nonzero(sel)[0])
+    # the inner face covers the selected polar cap only (its lowest ring at about 50 degrees); the
+    # selection's border zigzags along whole triangles, so make_shell leaves its teeth out (warned)
+    from bolus_addon.core.shell import drop_border_ears
+
+    region_T, teeth = drop_border_ears(T[sel[tp]])
+    assert teeth > 0
+    rim_z = V[np.unique(region_T)][:, 2].min()
     assert inner[:, 2].min() == pytest.approx(rim_z, abs=RES_CAP)
     inner = inner[inner[:, 2] > rim_z + 3 * RES_CAP]  # away from the rim (its corner is rounded by a voxel)
     assert np.abs(np.linalg.norm(inner, axis=1) - R_CAP).max() <= RES_CAP / 2 + 0.02
@@ -379,11 +384,11 @@ def test_thin_spot_warned_once(bpy_addon):
     assert shell_ops.thin_warnings(SimpleNamespace(**{**thin, "warnings": [core]}), 6.0) == []
 
 
-@pytest.mark.xfail(strict=True, reason="core.shell: the solid comes out of genus 3 (39 at 0.5 mm) instead of 1 "
-                   "on this band (see /work/notes/h11_h5_findings.md); remove this mark when fixed")
 def test_region_with_a_hole_keeps_it_open(bpy_addon, scene, capfd):
-    """A dome with its top cut away (a breathing hole): the bolus is one closed solid of genus 1
-    (Euler: V - E + F = 0) and the report counts the hole."""
+    """A dome with its top cut away along whole triangles (a breathing hole with a saw-tooth
+    border): the bolus is one closed solid of genus 1 (Euler: V - E + F = 0), a warning that the
+    48 teeth were left out (no warning of extra tunnels), and the report counts the hole (the teeth left tiny tunnels at the rim, genus 13 at
+    1 mm, until make_shell retried without the border's ears, with a warning)."""
     bpy = bpy_addon
     V, F = hemisphere_arrays(R=12.0, rings=12, na=48)
     keep = V[F].mean(axis=1)[:, 2] < 12.0 * math.cos(math.radians(35.0))
@@ -399,6 +404,7 @@ def test_region_with_a_hole_keeps_it_open(bpy_addon, scene, capfd):
     E = np.unique(np.sort(np.stack([T, np.roll(T, -1, axis=1)], axis=2).reshape(-1, 2), axis=1), axis=0)
     assert len(np.unique(T)) - len(E) + len(T) == 0, "not one solid with one hole through it"
     assert bolus["bolus_holes"] == 1 and "1 hole kept open" in out, out
+    assert "more tunnel" not in out and "48 teeth" in out, out
     # nothing of the solid above the hole's rim: the hole goes through
     top = np.linalg.norm(Vb[:, :2], axis=1) < 12.0 * math.sin(math.radians(35.0)) - 2 * RES_CAP
     assert not top.any()

@@ -416,3 +416,72 @@ def test_dome_with_a_smooth_top_hole_has_genus_one(res):
     assert sh.holes == 1 and rep["closed"] and rep["components"] == 1 and rep["genus"] == 1
     top = np.linalg.norm(sh.V[:, :2], axis=1) < 12.0 * np.sin(np.radians(35.0)) - 2 * res
     assert not top.any()  # nothing above the hole: it goes through
+
+
+# ---------------------------------------------------------------- saw-tooth borders and the topology check
+def _zigzag_dome():
+    """A dome R 12 mm with its top cut away along whole triangles: the hole's border is a saw of
+    triangles with two border edges (H5's repro, genus 13 at 1 mm before the ears were dropped)."""
+    phi = np.linspace(0.0, 0.5 * math.pi, 13)[:-1]
+    V, F, _ = ring_surface(np.c_[12.0 * np.cos(phi), 12.0 * np.sin(phi)], na=48, pole=True)
+    P = V[F]
+    N = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+    if (np.einsum("ij,ij->i", N, P.mean(1)) < 0).mean() > 0.5:
+        F = F[:, ::-1]
+    keep = V[F].mean(axis=1)[:, 2] < 12.0 * math.cos(math.radians(35.0))
+    used, inv = np.unique(F[keep], return_inverse=True)
+    return V[used], inv.reshape(-1, 3)
+
+
+def _border_edges_per_face(F):
+    e = np.sort(np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    _, inv, cnt = np.unique(e, axis=0, return_inverse=True, return_counts=True)
+    return (cnt[inv.ravel()] == 1).reshape(-1, 3).sum(axis=1)
+
+
+def test_drop_border_ears_removes_the_saw_and_keeps_the_loops():
+    from bolus_addon.core.cutting import boundary_loops
+    from bolus_addon.core.shell import drop_border_ears
+
+    V, F = _zigzag_dome()
+    assert (_border_edges_per_face(F) >= 2).sum() == 48  # one tooth per sector
+    F2, dropped = drop_border_ears(F)
+    assert dropped == 48 and len(F2) == len(F) - 48
+    assert (_border_edges_per_face(F2) < 2).all()
+    assert len(boundary_loops(F2)) == len(boundary_loops(F)) == 2
+    # a smooth border (no ears) is left as it is
+    F3, none = drop_border_ears(F2)
+    assert none == 0 and np.array_equal(F3, F2)
+
+
+@pytest.mark.parametrize("res", [1.0, 0.5])
+def test_saw_tooth_hole_border_gives_one_tunnel(res):
+    """The dome with the saw-tooth hole: the tunnels the teeth leave are found (topology check) and
+    the shell is made again without the teeth: one solid of genus 1, the teeth named."""
+    V, F = _zigzag_dome()
+    s = make_shell(V, F, 4.0, 0.0, res)
+    r = closed_report(s.V, s.F)
+    assert r["closed"] and r["components"] == 1 and r["genus"] == 1, r
+    assert s.holes == 1 and not any("tunnel" in w for w in s.warnings[1:]), s.warnings
+    assert "48 teeth" in s.warnings[0] and s.stats["border_teeth_dropped"] == 48
+
+
+def test_topology_warning_counts_extra_tunnels():
+    """A disk region thickened should be a ball (Euler characteristic 2): a torus (0) is one
+    tunnel too many, two balls (4) one piece too many; the ball itself is not warned."""
+    import manifold3d as m3
+
+    from bolus_addon.core.shell import _topology_warnings, euler_characteristic
+    from bolus_addon.core.solid import from_manifold
+
+    Vd, Fd = grid(6, 6)
+    skin = type("Skin", (), {"V": Vd, "F": Fd})()
+    assert euler_characteristic(Vd, Fd) == 1
+    ball = from_manifold(m3.Manifold.sphere(5.0, 32))
+    torus = from_manifold(m3.Manifold.revolve(m3.CrossSection.circle(1.0, 16).translate([4.0, 0.0]), 32))
+    two = from_manifold(m3.Manifold.sphere(1.0, 16) + m3.Manifold.sphere(1.0, 16).translate([5.0, 0.0, 0.0]))
+    assert _topology_warnings(skin, *ball) == []
+    (w,) = _topology_warnings(skin, *torus)
+    assert "1 more tunnel" in w and "Euler characteristic 0, 2 expected" in w
+    (w,) = _topology_warnings(skin, *two)
+    assert "1 fewer tunnel" in w and "Euler characteristic 4, 2 expected" in w

@@ -282,7 +282,8 @@ def _fmt(p):
 
 
 # ---------------------------------------------------------------------------- make_shell
-def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=None, progress=None) -> Shell:
+def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=None, progress=None,
+               _saw_retry=True) -> Shell:
     """A closed bolus solid on the skin region V (n,3) mm, F (m,3) (an open surface whose face
     normals point away from the body; the shell grows on that side).
 
@@ -391,6 +392,20 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
             f"{rays['wall']} left through the rim or a hole channel, {rays['none']} found no wall (creases): "
             "min / mean / max count the first kind only")
 
+    topo_warnings = _topology_warnings(skin, Vo, Fo)
+    if _saw_retry and topo_warnings and "more tunnel" in topo_warnings[0]:
+        F2, ears = drop_border_ears(F)
+        if ears:  # a saw-tooth border (whole triangles) left tiny tunnels at the rim: once more without its teeth
+            _progress(progress, 0.5, f"again without the border's {ears} saw teeth")
+            again = make_shell(V, F2, t, c, res, others=others, _saw_retry=False,
+                               progress=None if progress is None else (lambda f, text: progress(0.5 + 0.5 * f, text)))
+            size = float(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).max())
+            again.warnings.insert(0, f"the region's border zigzags along whole triangles: its {ears} teeth (triangles "
+                                     f"with two border edges, up to {size:.1f} mm) are left out of the bolus so that "
+                                     "the rim closes without tiny tunnels; Select Treatment Area gives a smooth border")
+            again.stats["border_teeth_dropped"] = ears
+            return again
+    warnings += topo_warnings
     if others is not None:
         _progress(progress, 0.95, "collision with the rest of the skin")
         n, depth, where = _collision(skin, others, t, c, res, M)
@@ -404,6 +419,56 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     return Shell(V=Vo, F=Fo, side=side, thickness=t, clearance=c, resolution=res, volume_mm3=float(M.volume()),
                  thickness_min=tmin, thickness_mean=tmean, thickness_max=tmax, holes=len(holes), warnings=warnings,
                  stats=stats)
+
+
+def drop_border_ears(F, max_fraction=0.25):
+    """(F' (m',3), dropped): the region without its border 'ears', triangles with two border
+    edges.  A border cut along whole triangles zigzags (a saw of such teeth, finer than a voxel),
+    and the rim wall swept along that saw leaves tiny tunnels in the level set; without the teeth
+    the border runs along the next row's edges.  One pass only (a smooth border has no ears, a
+    region of a few triangles keeps them: nothing is dropped when more than `max_fraction` of the
+    triangles are ears or when a vertex would be left with no triangle of the border's row)."""
+    F = np.asarray(F)
+    if len(F) < 8:
+        return F, 0
+    e = np.sort(np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    _, inv, cnt = np.unique(e, axis=0, return_inverse=True, return_counts=True)
+    border = (cnt[inv.ravel()] == 1).reshape(-1, 3)
+    ear = border.sum(axis=1) >= 2
+    if not ear.any() or ear.sum() > max_fraction * len(F) or border.sum(axis=1).max() == 3:
+        return F, 0
+    from .cutting import boundary_loops
+
+    kept = F[~ear]
+    before, after = boundary_loops(F), boundary_loops(kept)
+    if len(after) != len(before) or len(np.unique(np.concatenate(after))) != sum(len(x) for x in after):
+        return F, 0  # the saw's removal would split a loop or pinch a vertex: keep the teeth
+    return kept, int(ear.sum())
+
+
+def euler_characteristic(V, F) -> int:
+    """V - E + F of the triangles F (m,3) over the vertices they use (V (n,3) only gives n)."""
+    used = np.unique(F)
+    E = np.unique(np.sort(np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2), axis=1), axis=0)
+    return int(len(used) - len(E) + len(F))
+
+
+def _topology_warnings(skin, Vo, Fo) -> list[str]:
+    """A warning when the solid's topology is not the region's thickened: a thickened surface S
+    has Euler characteristic 2 chi(S) (a disk with h holes -> a solid with h tunnels), so a
+    difference counts tunnels the level set added (a border zigzagging along whole faces finer
+    than the resolution leaves tiny ones at the rim) or holes it closed over."""
+    want, got = 2 * euler_characteristic(skin.V, skin.F), euler_characteristic(Vo, Fo)
+    if got == want:
+        return []
+    extra = (want - got) // 2
+    if extra > 0:
+        return [f"the bolus has {extra} more tunnel(s) through it than the region has holes (Euler characteristic "
+                f"{got}, {want} expected): tiny openings at the rim where the border zigzags along whole faces, "
+                "finer than the resolution; check the rim, or select the area with Select Treatment Area (a smooth "
+                "border) or choose a finer resolution"]
+    return [f"the bolus has {-extra} fewer tunnel(s) than the region has holes, or more separate pieces (Euler "
+            f"characteristic {got}, {want} expected): a hole may be closed over; check the holes"]
 
 
 def _drop_crumbs(M):
