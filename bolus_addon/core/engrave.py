@@ -14,49 +14,34 @@ below each face under it, measured along the face normal: the text bends with th
 boolean difference (no hand-written boolean); faces keep the side class they came from (face
 ids tracked through the boolean) and the walls and floors of the letters get SIDE_OUTER.
 
-A spot is used only when the text's box plus a margin lies entirely on the outer face
-(no rim, cut or connector face under it, the face tilted at most ``MAX_TILT_DEG`` from n0)
-and the wall under the letters is at least twice the depth (ray casts); otherwise the
-solid comes back unchanged with a note giving the figures.  The x stretch of the letters
-on a curved face is at most 1 / cos(tilt) (the outline is projected along n0).
-
-Placement.  Spots are points sampled every SPOT_SPACING_MM on the outer face.  A label goes to
-the spot farthest from the rim / cut / connector faces (then the nearest to the middle), a marker
-to the spot farthest towards the patient's left ("L") or right ("R") that still has room; up to
-MAX_TRIES spots, spread over the face, are tried.  `engrave_labels` tries LABEL_HEIGHTS and,
-for the label, the text turned along the direction the face is longest in around the spot.
+Where a text fits (room on the outer face, tilt, the wall under it, the order spots are tried
+in): engrave_place.py; the outer face seen from outside (spots, the projection S): engrave_surface.py.
+`engrave_labels` tries LABEL_HEIGHTS and, for the label, the text turned along the direction the
+face is longest in around the spot.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 import manifold3d as m3
 
+from .engrave_place import (MARGIN_MM, MARGIN_REL, MAX_TILT_DEG, MAX_TRIES, WALL_FACTOR, _clearance,
+                            _default_up, _NoFit, _place, _roomiest_first, _Spot, _text_box)
+from .engrave_surface import SPOT_SPACING_MM, _Surface, _unit
 from .errors import BolusError
-from .solid import SIDE_CONNECTOR, SIDE_CUT, SIDE_NAMES, SIDE_OUTER, SIDE_RIM, ray_thickness, to_manifold
+from .solid import SIDE_OUTER
 from .topology import check_mesh, submesh
 
-__all__ = ["TextOutline", "engrave_text", "engrave_labels", "strings_needed"]
+__all__ = ["TextOutline", "engrave_text", "engrave_labels", "strings_needed",
+           # re-exported from engrave_place / engrave_surface
+           "MAX_TILT_DEG", "MARGIN_MM", "MARGIN_REL", "WALL_FACTOR", "MAX_TRIES", "SPOT_SPACING_MM"]
 
 #: how far the cutting prism rises above the surface (mm; at least the depth)
 LIFT_MM = 0.5
-#: steepest tilt of the outer face under the text against the normal at its centre (degrees)
-MAX_TILT_DEG = 40.0
-#: margin around the text's box that must lie on the outer face: max(MARGIN_MM, MARGIN_REL * height)
-MARGIN_MM, MARGIN_REL = 1.0, 0.2
-#: the wall under the letters must be at least this many times the depth
-WALL_FACTOR = 2.0
 #: letter heights (cap height, mm) tried by `engrave_labels`, largest first
 LABEL_HEIGHTS = (6.0, 5.0, 4.0)
-#: spots tried per text and orientation
-MAX_TRIES = 12
-#: spacing of the points sampled on the faces to find spots (mm)
-SPOT_SPACING_MM = 1.0
-#: sides that bound the outer face: the text keeps its distance from them
-_BOUNDING_SIDES = (SIDE_RIM, SIDE_CUT, SIDE_CONNECTOR)
 
 
 @dataclass
@@ -79,334 +64,6 @@ def strings_needed(label: str, part_count: int | None = None) -> list[str]:
     if part_count is None:
         return [label, "L", "R"]
     return [f"{label} {i}" for i in range(int(part_count))] + ["L", "R"]
-
-
-# ---------------------------------------------------------------- the outer face seen from outside
-
-def _sample_faces(V, F, faces, spacing):
-    """Points on the triangles ``faces`` at about ``spacing`` (barycentric grids): (points (s,3),
-    face (s,), bary (s,3))."""
-    faces = np.asarray(faces, dtype=np.int64)
-    if len(faces) == 0:
-        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-    T = V[F[faces]]
-    longest = np.max(np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2), axis=1)
-    nsub = np.clip(np.ceil(longest / spacing), 1, 64).astype(np.int64)
-    pts, fs, bs = [], [], []
-    for n in np.unique(nsub):
-        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-        keep = (i + j) <= n
-        b = np.stack([i[keep], j[keep], n - i[keep] - j[keep]], axis=1) / n
-        b = np.r_[b, [[1 / 3, 1 / 3, 1 / 3]]]
-        sel = np.nonzero(nsub == n)[0]
-        P = np.einsum("kj,fjd->fkd", b, T[sel]).reshape(-1, 3)
-        pts.append(P)
-        fs.append(np.repeat(faces[sel], len(b)))
-        bs.append(np.tile(b, (len(sel), 1)))
-    return np.concatenate(pts), np.concatenate(fs), np.concatenate(bs)
-
-
-def _thin_out(P, h):
-    """Indices (sorted) of one point of P (k,3) per cube of side h."""
-    if len(P) == 0:
-        return np.zeros(0, dtype=np.int64)
-    key = np.floor((P - P.min(axis=0)) / h).astype(np.int64)
-    dims = key.max(axis=0) + 1
-    flat = (key[:, 0] * dims[1] + key[:, 1]) * dims[2] + key[:, 2]
-    return np.sort(np.unique(flat, return_index=True)[1])
-
-
-def _locate_2d(Q, T):
-    """All (point, triangle, barycentrics) with point Q[i] (k,2) inside triangle T[t] (c,3,2)
-    (closed, edge-on triangles skipped), through a uniform grid of cells."""
-    lo, hi = T.min(axis=1), T.max(axis=1)
-    cell = max(float(np.median(np.max(hi - lo, axis=1))), 1e-6)
-    qlo = Q.min(axis=0) - cell
-    qhi = Q.max(axis=0) + cell
-    keep = np.nonzero(np.all(hi >= qlo, axis=1) & np.all(lo <= qhi, axis=1))[0]
-    empty = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
-    if len(keep) == 0 or len(Q) == 0:
-        return empty
-    ncell = np.ceil((qhi - qlo) / cell).astype(np.int64) + 1
-    i0 = np.clip(np.floor((lo[keep] - qlo) / cell).astype(np.int64), 0, ncell - 1)
-    i1 = np.clip(np.floor((hi[keep] - qlo) / cell).astype(np.int64), 0, ncell - 1)
-    span = i1 - i0 + 1
-    cnt = span[:, 0] * span[:, 1]
-    tri = np.repeat(keep, cnt)
-    local = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-    w = np.repeat(span[:, 0], cnt)
-    cid = (np.repeat(i0[:, 0], cnt) + local % w) * ncell[1] + np.repeat(i0[:, 1], cnt) + local // w
-    order = np.argsort(cid, kind="stable")
-    cid, tri = cid[order], tri[order]
-    qc = np.clip(np.floor((Q - qlo) / cell).astype(np.int64), 0, ncell - 1)
-    qid = qc[:, 0] * ncell[1] + qc[:, 1]
-    a = np.searchsorted(cid, qid, "left")
-    n = np.searchsorted(cid, qid, "right") - a
-    qi = np.repeat(np.arange(len(Q)), n)
-    ti = tri[np.repeat(a, n) + np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)]
-    A = T[ti, 0]
-    e1, e2, q = T[ti, 1] - A, T[ti, 2] - A, Q[qi] - A
-    den = e1[:, 0] * e2[:, 1] - e2[:, 0] * e1[:, 1]
-    scale = np.maximum(np.abs(e1).max(axis=1), np.abs(e2).max(axis=1)) ** 2
-    ok = np.abs(den) > 1e-12 * scale
-    den = np.where(ok, den, 1.0)
-    b1 = (q[:, 0] * e2[:, 1] - e2[:, 0] * q[:, 1]) / den
-    b2 = (e1[:, 0] * q[:, 1] - q[:, 0] * e1[:, 1]) / den
-    b0 = 1.0 - b1 - b2
-    eps = 1e-9
-    inside = ok & (b0 >= -eps) & (b1 >= -eps) & (b2 >= -eps)
-    return qi[inside], ti[inside], np.stack([b0, b1, b2], axis=1)[inside]
-
-
-def _unit(v):
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.where(n > 1e-300, n, 1.0)
-
-
-class _Surface:
-    """A closed solid V, F with face classes ``side``: its outer face seen from outside."""
-
-    def __init__(self, V, F, side, what="the solid"):
-        self.V, self.F, self.side, self.what = V, F, side, what
-        T = V[F]
-        cr = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
-        self.fn = _unit(cr)
-        outer = np.nonzero(side == SIDE_OUTER)[0]
-        vn = np.zeros_like(V)
-        np.add.at(vn, F[outer].ravel(), np.repeat(cr[outer], 3, axis=0))
-        self.vn = _unit(vn)
-        spots, face, bary = _sample_faces(V, F, outer, SPOT_SPACING_MM)
-        keep = _thin_out(spots, SPOT_SPACING_MM)
-        self.spots, self.spot_face, self.spot_bary = spots[keep], face[keep], bary[keep]
-        self.spot_tree = cKDTree(self.spots)
-        bounds = _sample_faces(V, F, np.nonzero(np.isin(side, _BOUNDING_SIDES))[0], SPOT_SPACING_MM)[0]
-        self.bounds = bounds[_thin_out(bounds, SPOT_SPACING_MM)]
-        self.M, self.sid = _tracked_manifold(V, F, what)
-        self.centroids = T.mean(axis=1)
-        self.ctree = cKDTree(self.centroids)
-        self.frad = float(np.linalg.norm(T - self.centroids[:, None], axis=2).max())
-        Vc = V - V.mean(axis=0)
-        self.axes = np.linalg.svd(Vc, full_matrices=False)[2] if len(V) >= 3 else np.eye(3)
-
-    def normal_at(self, face, bary):
-        """Smooth normal N (k,3) at points (face, bary) and c = N . n_face (k,) (> 0)."""
-        N = _unit(np.einsum("kj,kjd->kd", bary, self.vn[self.F[face]]))
-        N = np.where(np.linalg.norm(N, axis=1, keepdims=True) > 0.5, N, self.fn[face])
-        c = np.einsum("kd,kd->k", N, self.fn[face])
-        return N, c
-
-    def project(self, p, n0, Q, reach):
-        """The first face facing n0 met coming from outside along n0 through each point Q (k,3) of
-        the plane through p normal to n0, within ``reach`` mm above / below it: face (k,) (-1: none),
-        the hit X (k,3), barycentrics (k,3)."""
-        k = len(Q)
-        face = np.full(k, -1, dtype=np.int64)
-        X = np.full((k, 3), np.nan)
-        bary = np.zeros((k, 3))
-        r = _unit(np.cross(n0, [1.0, 0.0, 0.0] if abs(n0[0]) < 0.9 else [0.0, 1.0, 0.0]))
-        u = np.cross(n0, r)
-        B = np.stack([r, u], axis=1)
-        if k == 0:
-            return face, X, bary
-        rho = float(np.linalg.norm(Q - p, axis=1).max())
-        near = np.asarray(self.ctree.query_ball_point(p, np.hypot(rho, reach) + self.frad), dtype=np.int64)
-        # faces seen from outside along n0 (a fold over the spot shows up as a jump in height)
-        near = near[(np.abs((self.centroids[near] - p) @ n0) <= reach + self.frad) & (self.fn[near] @ n0 > 0)]
-        if len(near) == 0:
-            return face, X, bary
-        T = self.V[self.F[near]] - p
-        qi, ti, b = _locate_2d((Q - p) @ B, T @ B)
-        if len(qi) == 0:
-            return face, X, bary
-        ti = near[ti]
-        Xh = np.einsum("kj,kjd->kd", b, self.V[self.F[ti]])
-        hh = (Xh - p) @ n0
-        order = np.lexsort((-hh, qi))
-        first = order[np.r_[True, qi[order][1:] != qi[order][:-1]]]
-        face[qi[first]] = ti[first]
-        X[qi[first]] = Xh[first]
-        bary[qi[first]] = b[first]
-        return face, X, bary
-
-
-def _tracked_manifold(V, F, what):
-    """The solid as a Manifold whose faces remember their index in F through booleans:
-    (Manifold, its run's original id)."""
-    sid = int(m3.Manifold.reserve_ids(1))
-    m = len(F)
-    mesh = m3.Mesh64(vert_properties=np.array(V, dtype=np.float64, order="C"),
-                     tri_verts=np.array(F, dtype=np.uint64, order="C"),
-                     run_index=np.array([0, 3 * m], dtype=np.uint64),
-                     run_original_id=np.array([sid], dtype=np.uint32),
-                     face_id=np.arange(m, dtype=np.uint64))
-    M = m3.Manifold(mesh)
-    if str(M.status()).split(".")[-1] != "NoError":
-        to_manifold(V, F, what)  # raises the named problem
-        raise BolusError(f"{what} could not be read as a closed solid ({M.status()})")
-    return M, sid
-
-
-# ---------------------------------------------------------------- placing one line of text
-
-@dataclass
-class _Spot:
-    p: np.ndarray       # (3,) centre of the text on the surface
-    r: np.ndarray       # (3,) text x axis
-    u: np.ndarray       # (3,) text y axis (up)
-    n: np.ndarray       # (3,) outward normal at p
-    height: float       # cap height, mm
-    centre: np.ndarray  # (2,) centre of the text's box in text units x height
-    footprint: np.ndarray  # (s,3) surface points under the box and margin
-    reach: float        # how far above / below the tangent plane the face was looked for
-
-
-class _NoFit(Exception):
-    pass
-
-
-def _text_box(text: TextOutline):
-    P = np.concatenate([np.asarray(p, dtype=np.float64).reshape(-1, 2) for p in text.polygons])
-    return P.min(axis=0), P.max(axis=0)
-
-
-def _fit(surf: _Surface, p, n0, up, text, height, depth, taken=()):
-    """Place ``text`` at p with up ``up`` (unit, normal to n0) clear of the footprints ``taken``
-    of text placed before: a `_Spot`, or raise _NoFit(note)."""
-    r = np.cross(up, n0)
-    lo, hi = _text_box(text)
-    lo, hi = lo * height, hi * height
-    margin = max(MARGIN_MM, MARGIN_REL * height)
-    half = 0.5 * (hi - lo) + margin
-    size = f"{hi[0] - lo[0]:.1f} x {hi[1] - lo[1]:.1f} mm with a {margin:.1f} mm margin"
-    # the box and its margin, sampled every `step` mm in the tangent plane, seen along n0
-    step = min(0.5, height / 8.0)
-    xs = np.linspace(-half[0], half[0], int(np.ceil(2 * half[0] / step)) + 1)
-    ys = np.linspace(-half[1], half[1], int(np.ceil(2 * half[1] / step)) + 1)
-    gx, gy = (g.ravel() for g in np.meshgrid(xs, ys, indexing="ij"))
-    reach = float(np.hypot(*half)) + 2.0  # the face tilts at most MAX_TILT_DEG < 45 degrees
-    face, X, bary = surf.project(p, n0, p + gx[:, None] * r + gy[:, None] * up, reach)
-    problem = _coverage_problem(surf, face, n0)
-    if problem is None:
-        # heights along n0 must run on without a jump (else a fold or an overhang hides the face)
-        H = ((X - p) @ n0).reshape(len(xs), len(ys))
-        jump = max(np.abs(np.diff(H, axis=0)).max(initial=0.0), np.abs(np.diff(H, axis=1)).max(initial=0.0))
-        if jump > step * np.tan(np.radians(MAX_TILT_DEG)) * 1.5 + 0.05:
-            problem = f"the face under it is partly hidden by a fold or an overhang (a step of {jump:.1f} mm)"
-        elif len(taken) and np.min(cKDTree(np.concatenate(taken)).query(X)[0]) < step:
-            problem = "it would overlap text placed before"
-    if problem is not None:
-        raise _NoFit(f"the text's box ({size}) does not fit: {problem}")
-    inner = (np.abs(gx) <= half[0] - margin + 1e-9) & (np.abs(gy) <= half[1] - margin + 1e-9)
-    _check_wall(surf, face[inner], bary[inner], X[inner], depth)
-    return _Spot(p=p, r=r, u=up, n=n0, height=height, centre=0.5 * (lo + hi), footprint=X, reach=reach)
-
-
-def _coverage_problem(surf: _Surface, face, n0):
-    """None when every sample (faces (k,), -1 for none) lies on the outer face tilted at most
-    MAX_TILT_DEG from n0, else what is wrong (shares of the samples)."""
-    hit = face >= 0
-    fside = np.where(hit, surf.side[np.maximum(face, 0)], -1)
-    tilt_ok = np.where(hit, surf.fn[np.maximum(face, 0)] @ n0, -1.0) >= np.cos(np.radians(MAX_TILT_DEG))
-    if np.all(hit & (fside == SIDE_OUTER) & tilt_ok):
-        return None
-    off = 100.0 * np.mean(~hit | (fside != SIDE_OUTER))
-    steep = 100.0 * np.mean(hit & (fside == SIDE_OUTER) & ~tilt_ok)
-    parts = []
-    if off > 0:
-        named = sorted({SIDE_NAMES.get(int(x), str(x)) for x in np.unique(fside[hit & (fside != SIDE_OUTER)])})
-        where = " or ".join(["past its edge"] * bool(np.any(~hit)) + [f"over {x} faces" for x in named])
-        parts.append(f"{_percent(off)} of it lies off the outer face ({where})")
-    if steep > 0:
-        parts.append(f"{_percent(steep)} of it lies where the face tilts more than {MAX_TILT_DEG:.0f} degrees")
-    return "; ".join(parts)
-
-
-def _check_wall(surf: _Surface, face, bary, X, depth):
-    """Raise _NoFit when the wall under the surface points X (k,3) (on faces / bary) is thinner than
-    WALL_FACTOR x depth (ray casts inward along the smooth normal, at most 400 of them)."""
-    pick = np.arange(0, len(X), max(1, len(X) // 400))
-    N, _ = surf.normal_at(face[pick], bary[pick])
-    wall = ray_thickness(surf.V, surf.F, X[pick], -N, max_mm=WALL_FACTOR * depth * 4, manifold=surf.M)
-    if len(wall) and wall.min() < WALL_FACTOR * depth:
-        i = int(np.argmin(wall))
-        raise _NoFit(f"the wall under the text is only {wall[i]:.2f} mm thick at ({_xyz(X[pick][i])}) mm "
-                     f"(at least {WALL_FACTOR:g} x the depth = {WALL_FACTOR * depth:.2f} mm is needed)")
-
-
-def _percent(x) -> str:
-    return f"{x:.0f} %" if x >= 1 else "under 1 %"
-
-
-def _xyz(v) -> str:
-    return ", ".join(f"{float(x):.1f}" for x in v)
-
-
-def _candidates(surf: _Surface, order_key, spread):
-    """Up to MAX_TRIES spots (indices into surf.spots), best (smallest key) first, at least
-    ``spread`` mm apart."""
-    alive = np.isfinite(order_key)
-    chosen = []
-    while alive.any() and len(chosen) < MAX_TRIES:
-        i = int(np.argmin(np.where(alive, order_key, np.inf)))
-        chosen.append(i)
-        alive &= np.linalg.norm(surf.spots - surf.spots[i], axis=1) >= spread
-    return chosen
-
-
-def _clearance(surf: _Surface, taken):
-    """Distance (s,) of each spot to the rim / cut / connector faces and to text placed before."""
-    pts = np.concatenate([surf.bounds] + [t[_thin_out(t, SPOT_SPACING_MM)] for t in taken])
-    if len(pts) == 0:
-        return np.full(len(surf.spots), np.inf)
-    return cKDTree(pts).query(surf.spots)[0]
-
-
-def _roomiest_first(surf: _Surface, clearance):
-    """Order key (s,) of the spots with ``clearance`` (s,): the farthest from the rim / cut faces
-    (and text placed before) first, in 0.5 mm steps, then the nearest to the middle of the outer face."""
-    mid = np.linalg.norm(surf.spots - surf.spots.mean(axis=0), axis=1) if len(surf.spots) else np.zeros(0)
-    if not np.isfinite(clearance).any():  # no rim at all
-        return mid
-    return -np.floor(clearance / 0.5) + 1e-6 * mid
-
-
-def _default_up(surf: _Surface, n0):
-    """The solid's longest extent projected on the tangent plane (turned to +z when it has a z
-    part), or the next axis when the longest one is along n0."""
-    for a in surf.axes:
-        t = a - (a @ n0) * n0
-        if np.linalg.norm(t) > 0.3:
-            t = _unit(t)
-            k = 2 if abs(t[2]) > 1e-6 else int(np.argmax(np.abs(t)))
-            return t if t[k] > 0 else -t
-    return _unit(np.cross(n0, [1.0, 0.0, 0.0] if abs(n0[0]) < 0.9 else [0.0, 1.0, 0.0]))
-
-
-def _place(surf, text, height, depth, key, clearance, up_of, taken):
-    """The first spot (of up to MAX_TRIES in the order of ``key`` (s,), with ``clearance`` (s,) from
-    `_clearance`) where ``text`` fits: a `_Spot`, or raise _NoFit naming what was in the way at the
-    best spot."""
-    lo, hi = _text_box(text)
-    margin = max(MARGIN_MM, MARGIN_REL * height)
-    need = 0.5 * (hi[1] - lo[1]) * height + margin  # half the height of the box: less cannot fit
-    key = np.where(clearance >= need, key, np.inf)
-    # spots at least half the text's width apart: a long label tries the whole face, not one hump
-    cand = _candidates(surf, key, spread=max(2.0, height, 0.5 * (hi[0] - lo[0]) * height))
-    if not cand:
-        best = float(clearance.max(initial=0.0))
-        raise _NoFit(f"no spot on the outer face is {need:.1f} mm from the rim / cut faces "
-                     f"(the roomiest has {best:.1f} mm), too small for {height:g} mm letters")
-    first_note = None
-    for i in cand:
-        N, _ = surf.normal_at(surf.spot_face[i:i + 1], surf.spot_bary[i:i + 1])
-        n0, p = N[0], surf.spots[i]
-        up = up_of(p, n0)
-        try:
-            return _fit(surf, p, n0, up, text, height, depth, taken)
-        except _NoFit as e:
-            if first_note is None:
-                first_note = f"at ({_xyz(p)}) mm, {clearance[i]:.1f} mm from the rim / cut faces, {e}"
-    raise _NoFit(first_note + f" (and at {len(cand) - 1} other spots)" * (len(cand) > 1))
 
 
 # ---------------------------------------------------------------- cutting
