@@ -1,8 +1,10 @@
 """core.shell: the bolus solid on a skin region (issue 11 point 1).  bpy-free; coarse
 resolutions (1.5-2 mm) keep the file fast -- speed figures live in bench/."""
+import array
 import math
 
 import numpy as np
+import manifold3d as m3
 import pytest
 
 from bolus_addon.core.distance_field import SkinDistance
@@ -346,6 +348,48 @@ def test_thickness_rays_skip_inner_vertices_without_a_normal():
     np.testing.assert_allclose(th, 10.0)
 
 
+def _checked_level_set(grid, f0, f1):
+    """Manifold.level_set with a checked lookup (rounding, lattice test, count of calls off the
+    lattices) on the padded lattices: the reference for shell_grid._level_set_fast (test only).  Returns (M, misses)."""
+    F0 = array.array("d", np.ascontiguousarray(f0[1:-1, 1:-1, 1:-1]).tobytes())
+    F1 = array.array("d", np.ascontiguousarray(f1[1:-1, 1:-1, 1:-1]).tobytes())
+    n0, n1 = grid.shape0, grid.shape1
+    s0y, s0z = n0[1] * n0[2], n0[2]
+    s1y, s1z = n1[1] * n1[2], n1[2]
+    lx, ly, lz = (float(x) for x in grid.lo)
+    ix, iy, iz = (float(1.0 / x) for x in grid.sp)
+    a0, b0, c0 = n0
+    a1, b1, c1 = n1
+    miss = [0]
+
+    def f(x, y, z):
+        u = (x - lx) * ix
+        v = (y - ly) * iy
+        w = (z - lz) * iz
+        ru = round(u)
+        rv = round(v)
+        rw = round(w)
+        if abs(u - ru) < 1e-4 and abs(v - rv) < 1e-4 and abs(w - rw) < 1e-4:
+            if 0 <= ru < a0 and 0 <= rv < b0 and 0 <= rw < c0:
+                return F0[ru * s0y + rv * s0z + rw]
+            return -1.0
+        u += 0.5
+        v += 0.5
+        w += 0.5
+        ru = round(u)
+        rv = round(v)
+        rw = round(w)
+        if abs(u - ru) < 1e-4 and abs(v - rv) < 1e-4 and abs(w - rw) < 1e-4:
+            if 0 <= ru < a1 and 0 <= rv < b1 and 0 <= rw < c1:
+                return F1[ru * s1y + rv * s1z + rw]
+            return -1.0
+        miss[0] += 1
+        return -1.0
+
+    M = m3.Manifold.level_set(f, list(grid.lo) + list(grid.hi), grid.res, 0.0, -1.0)
+    return M, miss[0]
+
+
 def test_fast_lookup_matches_the_checked_lookup():
     """The level set's lookup callback (three truncations) returns exactly the precomputed
     lattice values: same mesh as a lookup that rounds, tests the lattice and counts misses."""
@@ -360,7 +404,7 @@ def test_fast_lookup_matches_the_checked_lookup():
     coarse = S._coarse_terms(skin, g, t, c, band)
     f0, _ = S._field_coarse_to_fine(skin, g, 0, t, c, rim_cap, band, coarse, None, 0, 1)
     f1, _ = S._field_coarse_to_fine(skin, g, 1, t, c, rim_cap, band, coarse, None, 0, 1)
-    M_ref, misses = S._level_set(g, f0, f1)
+    M_ref, misses = _checked_level_set(g, f0, f1)
     V1, F1 = from_manifold(M_ref)
     V2, F2 = from_manifold(S._level_set_fast(g, f0, f1))
     assert misses == 0 and len(F1) > 1000
@@ -469,19 +513,17 @@ def test_saw_tooth_hole_border_gives_one_tunnel(res):
 def test_topology_warning_counts_extra_tunnels():
     """A disk region thickened should be a ball (Euler characteristic 2): a torus (0) is one
     tunnel too many, two balls (4) one piece too many; the ball itself is not warned."""
-    import manifold3d as m3
-
-    from bolus_addon.core.shell import _topology_warnings, euler_characteristic
-    from bolus_addon.core.solid import from_manifold
+    from bolus_addon.core.cutting import surface_type
+    from bolus_addon.core.shell import _topology_warnings
 
     Vd, Fd = grid(6, 6)
-    skin = type("Skin", (), {"V": Vd, "F": Fd})()
-    assert euler_characteristic(Vd, Fd) == 1
-    ball = from_manifold(m3.Manifold.sphere(5.0, 32))
-    torus = from_manifold(m3.Manifold.revolve(m3.CrossSection.circle(1.0, 16).translate([4.0, 0.0]), 32))
-    two = from_manifold(m3.Manifold.sphere(1.0, 16) + m3.Manifold.sphere(1.0, 16).translate([5.0, 0.0, 0.0]))
-    assert _topology_warnings(skin, *ball) == []
-    (w,) = _topology_warnings(skin, *torus)
+    skin = SkinDistance(Vd, Fd)
+    assert surface_type(Vd, Fd)["euler_characteristic"] == 1
+    ball = m3.Manifold.sphere(5.0, 32)
+    torus = m3.Manifold.revolve(m3.CrossSection.circle(1.0, 16).translate([4.0, 0.0]), 32)
+    two = m3.Manifold.sphere(1.0, 16) + m3.Manifold.sphere(1.0, 16).translate([5.0, 0.0, 0.0])
+    assert _topology_warnings(skin, ball) == []
+    (w,) = _topology_warnings(skin, torus)
     assert "1 more tunnel" in w and "Euler characteristic 0, 2 expected" in w
-    (w,) = _topology_warnings(skin, *two)
+    (w,) = _topology_warnings(skin, two)
     assert "1 fewer tunnel" in w and "Euler characteristic 4, 2 expected" in w

@@ -57,7 +57,6 @@ from .shell_grid import (  # noqa: F401  (the grid helpers are also reached as s
     _coarse_terms,
     _field_coarse_to_fine,
     _Grid,
-    _level_set,
     _level_set_fast,
     _progress,
     _solid_on_grid,
@@ -392,7 +391,7 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
             f"{rays['wall']} left through the rim or a hole channel, {rays['none']} found no wall (creases): "
             "min / mean / max count the first kind only")
 
-    topo_warnings = _topology_warnings(skin, Vo, Fo)
+    topo_warnings = _topology_warnings(skin, M)
     if _saw_retry and topo_warnings and "more tunnel" in topo_warnings[0]:
         F2, ears = drop_border_ears(F)
         if ears:  # a saw-tooth border (whole triangles) left tiny tunnels at the rim: once more without its teeth
@@ -431,34 +430,30 @@ def drop_border_ears(F, max_fraction=0.25):
     F = np.asarray(F)
     if len(F) < 8:
         return F, 0
-    e = np.sort(np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
-    _, inv, cnt = np.unique(e, axis=0, return_inverse=True, return_counts=True)
-    border = (cnt[inv.ravel()] == 1).reshape(-1, 3)
+    from .cutting import _topology_of_faces, boundary_loops
+
+    topo = _topology_of_faces(F)
+    border = topo.boundary_edges[topo.face_edges]  # (m,3): is each edge of each face a border edge
     ear = border.sum(axis=1) >= 2
     if not ear.any() or ear.sum() > max_fraction * len(F) or border.sum(axis=1).max() == 3:
         return F, 0
-    from .cutting import boundary_loops
-
     kept = F[~ear]
-    before, after = boundary_loops(F), boundary_loops(kept)
+    before, after = boundary_loops(F, topo), boundary_loops(kept)
     if len(after) != len(before) or len(np.unique(np.concatenate(after))) != sum(len(x) for x in after):
         return F, 0  # the saw's removal would split a loop or pinch a vertex: keep the teeth
     return kept, int(ear.sum())
 
 
-def euler_characteristic(V, F) -> int:
-    """V - E + F of the triangles F (m,3) over the vertices they use (V (n,3) only gives n)."""
-    used = np.unique(F)
-    E = np.unique(np.sort(np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2), axis=1), axis=0)
-    return int(len(used) - len(E) + len(F))
-
-
-def _topology_warnings(skin, Vo, Fo) -> list[str]:
+def _topology_warnings(skin, M) -> list[str]:
     """A warning when the solid's topology is not the region's thickened: a thickened surface S
     has Euler characteristic 2 chi(S) (a disk with h holes -> a solid with h tunnels), so a
     difference counts tunnels the level set added (a border zigzagging along whole faces finer
-    than the resolution leaves tiny ones at the rim) or holes it closed over."""
-    want, got = 2 * euler_characteristic(skin.V, skin.F), euler_characteristic(Vo, Fo)
+    than the resolution leaves tiny ones at the rim) or holes it closed over.  skin: the
+    region's SkinDistance (its MeshTopology gives V - E + F); M: the solid (manifold3d's genus is
+    1 - chi / 2 over the whole mesh)."""
+    topo = skin.topo
+    want = 2 * (int(topo.used_vertices.sum()) - len(topo.edges) + topo.m)
+    got = 2 - 2 * int(M.genus())
     if got == want:
         return []
     extra = (want - got) // 2

@@ -9,7 +9,6 @@ callback just looks them up.
 """
 from __future__ import annotations
 
-import array
 import time
 
 import numpy as np
@@ -18,7 +17,7 @@ import manifold3d as m3
 
 from .errors import BolusError
 
-__all__ = ["_Grid", "_coarse_terms", "_field_coarse_to_fine", "_level_set", "_level_set_fast", "_tight_box",
+__all__ = ["_Grid", "_coarse_terms", "_field_coarse_to_fine", "_level_set_fast", "_tight_box",
            "_solid_on_grid", "_progress"]
 
 
@@ -137,51 +136,9 @@ def _field_coarse_to_fine(skin, grid, lattice, t, c, rim_cap, band, coarse, prog
     return padded, n_exact
 
 
-def _level_set(grid, f0, f1):
-    """Manifold.level_set with a checked lookup (rounding, lattice test, count of calls off the
-    lattices) on the padded lattices: the reference for `_level_set_fast`.  Returns (M, misses)."""
-    F0 = array.array("d", np.ascontiguousarray(f0[1:-1, 1:-1, 1:-1]).tobytes())
-    F1 = array.array("d", np.ascontiguousarray(f1[1:-1, 1:-1, 1:-1]).tobytes())
-    n0, n1 = grid.shape0, grid.shape1
-    s0y, s0z = n0[1] * n0[2], n0[2]
-    s1y, s1z = n1[1] * n1[2], n1[2]
-    lx, ly, lz = (float(x) for x in grid.lo)
-    ix, iy, iz = (float(1.0 / x) for x in grid.sp)
-    a0, b0, c0 = n0
-    a1, b1, c1 = n1
-    miss = [0]
-
-    def f(x, y, z):
-        u = (x - lx) * ix
-        v = (y - ly) * iy
-        w = (z - lz) * iz
-        ru = round(u)
-        rv = round(v)
-        rw = round(w)
-        if abs(u - ru) < 1e-4 and abs(v - rv) < 1e-4 and abs(w - rw) < 1e-4:
-            if 0 <= ru < a0 and 0 <= rv < b0 and 0 <= rw < c0:
-                return F0[ru * s0y + rv * s0z + rw]
-            return -1.0
-        u += 0.5
-        v += 0.5
-        w += 0.5
-        ru = round(u)
-        rv = round(v)
-        rw = round(w)
-        if abs(u - ru) < 1e-4 and abs(v - rv) < 1e-4 and abs(w - rw) < 1e-4:
-            if 0 <= ru < a1 and 0 <= rv < b1 and 0 <= rw < c1:
-                return F1[ru * s1y + rv * s1z + rw]
-            return -1.0
-        miss[0] += 1
-        return -1.0
-
-    M = m3.Manifold.level_set(f, list(grid.lo) + list(grid.hi), grid.res, 0.0, -1.0)
-    return M, miss[0]
-
-
 def _level_set_fast(grid, f0, f1):
-    """Manifold.level_set with the cheapest lookup callback (about half the time of
-    `_level_set`): f0, f1 the lattices padded by one layer of -1, and w = (x - lo) / sp + 1.25 gives
+    """Manifold.level_set with the cheapest lookup callback (about half the time of a rounding,
+    lattice-testing lookup; tests/test_core_shell.py checks they give the same mesh): f0, f1 the lattices padded by one layer of -1, and w = (x - lo) / sp + 1.25 gives
     int(w) = i + 1 on lattice 0 (frac 0.25) and int(w) = i on lattice 1 (frac 0.75), so three
     truncations and one comparison find the value."""
     n0 = tuple(x + 2 for x in grid.shape0)
