@@ -84,6 +84,41 @@ def seam_allowance_property(**kw):
                          default=0.0, min=0.0, soft_max=20.0, **kw)
 
 
+def max_el_property(**kw):
+    return FloatProperty(
+        name="Max EL",
+        description=(
+            "Largest length error (EL, %) a pattern piece may have: a patch that would exceed it gets darts at "
+            "its dome points (nose tip, chin) and is split along its grooves until every piece meets it or the "
+            "piece limit is reached; 0 = off (one piece per patch)"
+        ),
+        default=2.0, min=0.0, soft_max=10.0, precision=1, subtype="PERCENTAGE", **kw,
+    )
+
+
+def sheet_thickness_property(**kw):
+    return FloatProperty(
+        name="Sheet thickness",
+        description=(
+            "Thickness of the bolus sheet in mm: the pattern is unfolded from the mid-surface (the skin moved out "
+            "by half of it) and every piece gets its bending strain and a sheet-or-print advice; 0 = unfold the "
+            "skin itself"
+        ),
+        default=0.0, min=0.0, soft_max=20.0, precision=1, **kw,
+    )
+
+
+PAGE_ITEMS = [
+    ("NONE", "One page", "PDF: one page the size of the whole pattern (for a plotter or a large-format printer)"),
+    ("A4", "A4 tiles", "PDF: tiled on A4 pages with overlap and alignment marks"),
+    ("LETTER", "Letter tiles", "PDF: tiled on US Letter pages with overlap and alignment marks"),
+]
+
+
+def page_property(**kw):
+    return EnumProperty(name="Pages", items=PAGE_ITEMS, default="NONE", **kw)
+
+
 def warn_distortion_property(**kw):
     return FloatProperty(
         name="Warn above",
@@ -151,7 +186,7 @@ def resolution_property(**kw):
                          default=0.5, soft_min=0.2, soft_max=2.0, precision=2, **kw)
 
 
-def label_property(**kw):
+def label_property(**kw):  # also the ID printed on every pattern piece (export_pattern)
     return StringProperty(name="Label", description="Text engraved 0.6 mm deep on the bolus's outer face (e.g. a "
                           "patient ID; each print part gets '<label> <part>') with L / R markers; empty = none",
                           default="", **kw)
@@ -197,6 +232,9 @@ class BolusSettings(bpy.types.PropertyGroup):
     unfold_method: unfold_method_property()
     refine: refine_property()
     gap_mm: gap_property()
+    max_el_pct: max_el_property()
+    sheet_thickness_mm: sheet_thickness_property()
+    page: page_property()
     seam_allowance_mm: seam_allowance_property()
     warn_distortion_pct: warn_distortion_property()
     parts: parts_property()

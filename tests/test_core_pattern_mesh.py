@@ -8,6 +8,7 @@ from meshgen import cylinder_piece, grid
 from bolus_addon.core.errors import BolusError
 from bolus_addon.core.pattern_mesh import (
     build_pattern,
+    collect_pieces,
     diagnose_pieces,
     patch_islands,
     pattern_messages,
@@ -213,9 +214,49 @@ def test_messages_pass_the_cores_warnings_as_they_are_no_text_filter():
 
 def test_piece_rows_name_the_pieces_of_a_split_patch():
     isl = patch_islands(*grid(6, 1), np.r_[[0, 0, 1, 1, 0, 0], [0, 0, 1, 1, 0, 0]])
-    rows = piece_rows(isl, [fake_unfolding()] * 3, {0: (0.1, 0.2, 0)})
+    # errors are per piece (island): piece 2 measured, the others fall back to their unfolding's own
+    rows = piece_rows(isl, [fake_unfolding()] * 3, {2: (0.1, 0.2, 0)})
     assert [r["name"] for r in rows] == ["patch 0 piece 1/2", "patch 1", "patch 0 piece 2/2"]
-    assert [r["EL"] for r in rows] == [0.1, 0.01, 0.1] and [r["faces"] for r in rows] == [4, 4, 4]
+    assert [r["EL"] for r in rows] == [0.01, 0.01, 0.1] and [r["faces"] for r in rows] == [4, 4, 4]
+    assert [(r["piece_in_patch"], r["pieces_in_patch"]) for r in rows] == [(1, 2), (1, 1), (2, 2)]
+
+
+def _sheet(piece, darts=(), splits=(), met=True, reason=""):
+    from types import SimpleNamespace  # noqa: PLC0415
+    k = int(np.max(piece)) + 1
+    return SimpleNamespace(piece=np.asarray(piece), unfoldings=[fake_unfolding()] * k, darts=list(darts),
+                           splits=list(splits), met=met, reason=reason)
+
+
+def test_collect_pieces_numbers_the_pieces_of_every_island_in_turn():
+    from types import SimpleNamespace  # noqa: PLC0415
+    isl = patch_islands(*grid(6, 1), np.r_[[0, 0, 1, 1, 0, 0], [0, 0, 1, 1, 0, 0]])
+    # island 0 (4 triangles) split in two with a dart in its second piece; islands 1, 2 one piece each
+    dart = SimpleNamespace(piece=1, path=np.array([3, 4]), defect=0.5)
+    split = SimpleNamespace(pieces=(0, 1), path=np.array([1, 8]), excess=0.2)
+    res = [_sheet([0, 1, 1, 0], [dart], [split]), _sheet([0, 0, 0, 0]), _sheet([0, 0, 0, 0], met=False,
+                                                                                 reason="piece 1: EL 5 %")]
+    lay = collect_pieces(isl, res)
+    rows0 = np.nonzero(isl.islands == 0)[0]
+    assert lay.islands.islands[rows0].tolist() == [0, 1, 1, 0]
+    assert set(lay.islands.islands[isl.islands == 1].tolist()) == {2}
+    assert set(lay.islands.islands[isl.islands == 2].tolist()) == {3}
+    assert lay.islands.island_patch.tolist() == [0, 0, 1, 0] and len(lay.unfoldings) == 4
+    assert lay.darts_of(1) == 1 and lay.darts_of(0) == 0 and lay.splits_of(0) == 1 and lay.splits_of(1) == 0
+    assert lay.unmet == [(0, "piece 1: EL 5 %")]
+    rows = piece_rows(lay.islands, lay.unfoldings, {})
+    assert [r["name"] for r in rows] == ["patch 0 piece 1/3", "patch 0 piece 2/3", "patch 1", "patch 0 piece 3/3"]
+    with pytest.raises(BolusError, match="do not cover"):
+        collect_pieces(isl, [_sheet([0, 1, 1]), res[1], res[2]])
+
+
+def test_a_polygon_torn_between_two_pieces_is_refused():
+    V, F, tri_poly, ls, lt, lv, _ = two_patch_cylinder()
+    tri_island = np.zeros(len(F), dtype=int)
+    tri_island[24 + 3] = 1  # the second triangle of quad 3 in another piece
+    with pytest.raises(BolusError, match="polygon 3 lies in two pattern pieces"):
+        pattern_polygons(tri_poly, tri_island, F, np.arange(3 * len(F)).reshape(-1, 3), np.arange(len(V)),
+                         ls, lt, lv)
 
 
 def test_table_rows_and_svg_pieces_bad_input():

@@ -35,6 +35,8 @@ from .topology import MeshTopology, check_mesh, face_areas, submesh
 
 __all__ = [
     "PatchIslands",
+    "SheetLayout",
+    "collect_pieces",
     "PatternPolygons",
     "PatternBuild",
     "patch_islands",
@@ -47,6 +49,8 @@ __all__ = [
     "pattern_messages",
     "svg_pieces",
     "table_rows",
+    "add_sheet_figures",
+    "sheet_messages",
 ]
 
 
@@ -99,6 +103,57 @@ def patch_islands(V, F, tri_labels, face_groups=None, vert_ids=None) -> PatchIsl
 
 
 @dataclass
+class SheetLayout:
+    """The pieces of all islands after darts and splits (`collect_pieces`).
+
+    islands: a `PatchIslands` whose islands are the pieces (piece of every triangle, -1
+    outside; island_patch: patch of every piece); unfoldings: one per piece; darts:
+    [(piece, path (k,) region vertex ids boundary -> apex, defect rad)]; splits: [(patch,
+    (piece a, piece b), path (k,) region vertex ids)]; unmet: [(patch, reason)] of the
+    patches whose pieces miss the target.
+    """
+
+    islands: PatchIslands
+    unfoldings: list
+    darts: list
+    splits: list
+    unmet: list
+
+    def darts_of(self, piece: int) -> int:
+        return sum(1 for d in self.darts if d[0] == piece)
+
+    def splits_of(self, patch: int) -> int:
+        return sum(1 for sp in self.splits if sp[0] == patch)
+
+
+def collect_pieces(islands: PatchIslands, results: list) -> SheetLayout:
+    """Number the pieces of every island's `sheet_pieces.SheetPieces` (in ``results``, one per
+    island, their ``piece`` indexing the island's triangles in increasing order) one after
+    the other: piece ids 0..P-1 over the whole pattern, island by island."""
+    if len(results) != islands.count:
+        raise BolusError(f"internal error: {len(results)} refined islands for {islands.count} islands")
+    piece = np.full(len(islands.islands), -1, dtype=np.int64)
+    patch_of, unfoldings, darts, splits, unmet = [], [], [], [], []
+    for k, res in enumerate(results):
+        rows = np.nonzero(islands.islands == k)[0]
+        local = np.asarray(res.piece, dtype=np.int64)
+        if local.shape != rows.shape or (len(local) and local.min() < 0) or len(res.unfoldings) != (
+                int(local.max()) + 1 if len(local) else 0):
+            raise BolusError(f"internal error: island {k} has {len(rows)} triangles, its pieces do not cover them")
+        first = len(unfoldings)
+        p = int(islands.island_patch[k])
+        piece[rows] = first + local
+        patch_of.extend([p] * len(res.unfoldings))
+        unfoldings.extend(res.unfoldings)
+        darts.extend((first + d.piece, np.asarray(d.path), float(d.defect)) for d in res.darts)
+        splits.extend((p, (first + s.pieces[0], first + s.pieces[1]), np.asarray(s.path)) for s in res.splits)
+        if not res.met:
+            unmet.append((p, res.reason))
+    return SheetLayout(PatchIslands(piece, np.asarray(patch_of, dtype=np.int64), islands.left_out), unfoldings,
+                       darts, splits, unmet)
+
+
+@dataclass
 class PatternPolygons:
     """polys (p,) source polygon ids; sizes (p,) corners per polygon; corner_src (c,) the
     region vertex (row of V) of every corner; corner_pat (c,) its pattern vertex."""
@@ -139,8 +194,13 @@ def pattern_polygons(tri_poly, tri_island, F, F_pat, vert_ids, loop_start, loop_
     vert_ids = np.asarray(vert_ids, dtype=np.int64)
     lowest = np.full(len(loop_start), np.iinfo(np.int64).max)
     np.minimum.at(lowest, tri_poly, tri_island)
+    highest = np.full(len(loop_start), -1)
+    np.maximum.at(highest, tri_poly, tri_island)
     polys = np.unique(tri_poly)
     polys = polys[lowest[polys] >= 0]
+    torn = polys[highest[polys] != lowest[polys]]
+    if len(torn):  # a dart or split along a quad's diagonal would tear the polygon apart
+        raise BolusError(f"internal error: polygon {int(torn[0])} lies in two pattern pieces")
     sizes = loop_total[polys]
     first = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
     corner_loop = np.repeat(loop_start[polys] - first, sizes) + np.arange(sizes.sum())
@@ -179,8 +239,10 @@ class PatternBuild:
     """Everything the pattern object is made of.
 
     co (N,3) float32 scene units; polygons (`PatternPolygons`); poly_patch (p,) patch of
-    every polygon; area_error (p,) A / A0 - 1 of every polygon; errors {patch: (EL, EA,
-    flipped)} and None for all; UV (N,2) mm as stored; rows: the pattern table (`piece_rows`).
+    every polygon; poly_piece (p,) piece (island) of every polygon; area_error (p,) A / A0 - 1
+    of every polygon; errors {piece: (EL, EA, flipped)} and None for all; UV (N,2) mm as
+    stored; vert_source (N,) the region vertex (row of V) of every pattern vertex; rows: the
+    pattern table (`piece_rows`).
     """
 
     co: np.ndarray
@@ -190,6 +252,8 @@ class PatternBuild:
     errors: dict
     UV: np.ndarray
     rows: list = field(default_factory=list)
+    poly_piece: np.ndarray | None = None
+    vert_source: np.ndarray | None = None
 
 
 def build_pattern(V, F, tri_poly, vert_ids, islands: PatchIslands, unfoldings: list, poly_labels,
@@ -198,15 +262,17 @@ def build_pattern(V, F, tri_poly, vert_ids, islands: PatchIslands, unfoldings: l
 
     Parameters
     ----------
-    V : (n,3) mm, F : (m,3) - the region; tri_poly (m,), vert_ids (n,) as in `pattern_polygons`
-    islands : `patch_islands` of the region; unfoldings : one `Unfolding` per island, in order
+    V : (n,3) mm, F : (m,3) - the region (or its mid-surface: the reference EL / EA are
+        measured against); tri_poly (m,), vert_ids (n,) as in `pattern_polygons`
+    islands : the pieces (`patch_islands` of the region, or `collect_pieces` after darts and
+        splits); unfoldings : one `Unfolding` per island, in order
     poly_labels : (P,) int - the patch of every mesh polygon
     loop_start, loop_total, loop_vert : the mesh's polygons (see `pattern_polygons`)
     mm_per_unit : mm in one scene unit; gap_mm : space between islands
 
     Returns
     -------
-    PatternBuild; EL / EA (eqs. 3-30, 3-31) of each patch and of all are measured on the
+    PatternBuild; EL / EA (eqs. 3-30, 3-31) of each piece and of all are measured on the
     stored (float32) positions against the source polygons.
     """
     if len(unfoldings) != islands.count:
@@ -215,16 +281,23 @@ def build_pattern(V, F, tri_poly, vert_ids, islands: PatchIslands, unfoldings: l
     polys = pattern_polygons(tri_poly, islands.islands, F, pattern.F, vert_ids, loop_start, loop_total, loop_vert)
     co, UV = stored_positions(pattern.UV, mm_per_unit)
     poly_patch = np.asarray(poly_labels, dtype=np.int64)[polys.polys]
+    tri_poly = np.asarray(tri_poly, dtype=np.int64)
+    inside = islands.islands >= 0
+    piece_of_poly = np.full(int(tri_poly.max()) + 1 if len(tri_poly) else 0, -1, dtype=np.int64)
+    piece_of_poly[tri_poly[inside]] = islands.islands[inside]
+    poly_piece = piece_of_poly[polys.polys]
     args = (np.asarray(V, dtype=np.float64), polys.corner_src, UV, polys.corner_pat, polys.sizes)
-    errors = polygon_errors(*args, groups=poly_patch)
-    build = PatternBuild(co, polys, poly_patch, polygon_area_error(*args), errors, UV)
+    errors = polygon_errors(*args, groups=poly_piece)
+    build = PatternBuild(co, polys, poly_patch, polygon_area_error(*args), errors, UV, poly_piece=poly_piece,
+                         vert_source=np.asarray(pattern.vert_source, dtype=np.int64))
     build.rows = piece_rows(islands, unfoldings, errors)
     return build
 
 
 def piece_rows(islands: PatchIslands, unfoldings: list, errors: dict) -> list[dict]:
-    """The pattern table: one row per island (its patch's EL / EA / flips from ``errors``
-    when measured there, else the unfolding's own), named "patch p" or "patch p piece i/k"."""
+    """The pattern table: one row per island (piece) with its EL / EA / flips from ``errors``
+    ({island: (EL, EA, flipped)}) when measured there, else the unfolding's own; named
+    "patch p" or "patch p piece i/k" (``piece_in_patch`` i, 1-based, ``pieces_in_patch`` k)."""
     pieces_of = np.bincount(islands.island_patch[islands.island_patch >= 0])
     faces = np.bincount(islands.islands[islands.islands >= 0], minlength=islands.count)
     seen: dict[int, int] = {}
@@ -232,8 +305,9 @@ def piece_rows(islands: PatchIslands, unfoldings: list, errors: dict) -> list[di
     for k, u in enumerate(unfoldings):
         p = int(islands.island_patch[k])
         seen[p] = seen.get(p, 0) + 1
-        el, ea, fl = errors.get(p, (u.EL, u.EA, u.flipped))
-        rows.append({"island": k, "patch": p, "faces": int(faces[k]), "EL": el, "EA": ea, "flipped": fl,
+        el, ea, fl = errors.get(k, (u.EL, u.EA, u.flipped))
+        rows.append({"island": k, "patch": p, "piece_in_patch": seen[p], "pieces_in_patch": int(pieces_of[p]),
+                     "faces": int(faces[k]), "EL": el, "EA": ea, "flipped": fl,
                      "overlaps": u.overlaps, "cut": u.cut, "seconds": round(u.seconds, 3),
                      "iterations": u.iterations, "method": u.method,
                      "name": f"patch {p}" + (f" piece {seen[p]}/{pieces_of[p]}" if pieces_of[p] > 1 else "")})
@@ -300,6 +374,51 @@ def pattern_messages(unfoldings: list, rows: list[dict], errors: dict, warn_pct:
         out.append(("WARNING", f"{len(bad)} of {len(rows)} pattern pieces are not fit to cut (EL or EA above "
                                f"{warn_pct:g} %, or folded over): " + ", ".join(row["name"] for row in bad)
                     + "; see the advice above"))
+    return out
+
+
+def add_sheet_figures(rows: list[dict], layout: SheetLayout, bending: list | None) -> None:
+    """Add to every row its darts, its patch's splits and (with a sheet thickness) the
+    bending figures of `mid_surface.piece_bending` (R_min_mm, strain, sheet = "sheet" /
+    "print", sheet_reason); without a thickness ``sheet`` comes from the EL target only."""
+    for k, row in enumerate(rows):
+        row["darts"] = layout.darts_of(k)
+        row["splits"] = layout.splits_of(row["patch"])
+        if bending is not None:
+            b = bending[k]
+            row.update(R_min_mm=float(b.R_min_mm), strain=float(b.strain), sheet=b.advice, sheet_reason=b.reason)
+
+
+def sheet_messages(rows: list[dict], layout: SheetLayout, max_el: float, thickness_mm: float) -> list[tuple[str, str]]:
+    """The refinement's and the advice's messages as ``[(level, text)]``: per patch its darts
+    and splits (INFO), the patches that miss ``max_el`` (fraction) with the core's reason
+    (WARNING), every piece advised "print" with its figures (WARNING) and a count of the
+    advice (INFO).  ``thickness_mm`` 0: no bending figures."""
+    out: list[tuple[str, str]] = []
+    for p in sorted({r["patch"] for r in rows}):
+        mine = [r for r in rows if r["patch"] == p]
+        darts, splits = sum(r.get("darts", 0) for r in mine), layout.splits_of(p)
+        if darts or splits:
+            worst = max(mine, key=lambda r: r["EL"])
+            out.append(("INFO", f"Patch {p}: {darts} dart{'s' * (darts != 1)} and {splits} split"
+                                f"{'s' * (splits != 1)}: {len(mine)} piece{'s' * (len(mine) != 1)}, worst EL "
+                                f"{worst['EL'] * 100:.2f} % / EA {worst['EA'] * 100:.2f} % ({worst['name']})"))
+    for p, reason in layout.unmet:
+        out.append(("WARNING", f"Patch {p} misses the {max_el * 100:g} % EL target: {reason}"))
+    advised = [r for r in rows if "sheet" in r]
+    for r in advised:
+        if r["sheet"] == "print":
+            figures = (f"smallest radius {r['R_min_mm']:.1f} mm, bending strain ±{r['strain'] * 100:.0f} % in a "
+                       f"{thickness_mm:g} mm sheet, " if thickness_mm > 0 else "")
+            out.append(("WARNING", f"{r['name'].capitalize()}: {figures}EL {r['EL'] * 100:.1f} %: use the printed "
+                                   f"bolus here, not a sheet ({r.get('sheet_reason') or 'see its figures'})"))
+    if advised:
+        n_print = sum(r["sheet"] == "print" for r in advised)
+        out.append(("INFO", f"Sheet or print: {len(advised) - n_print} piece{'s' * (len(advised) - n_print != 1)} "
+                            f"can be cut from a {thickness_mm:g} mm sheet, {n_print} should be printed"
+                    if thickness_mm > 0 else
+                    f"Sheet or print: {len(advised) - n_print} of {len(advised)} pieces meet the EL target "
+                    "(give a sheet thickness for the bending advice)"))
     return out
 
 
