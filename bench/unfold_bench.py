@@ -839,6 +839,353 @@ def markdown(rows: list[dict], args, argv) -> str:
     return "\n".join(out)
 
 
+# ----------------------------------------------------------------------------- hard patches (issue 12)
+
+HARD_HEADING = "## Hard patches: darts and splits (`bench/unfold_bench.py`)"
+HARD_MAX_EL = 0.02  # sheet_pieces(max_el=...), the issue's target: every piece EL <= 2 %
+HARD_TARGET_EA = 0.03  # every piece EA < 3 %
+HARD_TARGET_TIME = 2.0  # ours with refinement / SLIM-100
+HARD_SLIM_KEYS = ("SLIM-10", "SLIM-100")
+
+
+def sheet_pieces_function():
+    """`core.sheet_pieces.sheet_pieces`, or None while the module does not exist (the bench says so)."""
+    try:
+        from bolus_addon.core.sheet_pieces import sheet_pieces
+    except ImportError:
+        return None
+    return sheet_pieces
+
+
+def triangle_areas(V, F):
+    import numpy as np
+
+    return 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
+
+
+def measure_pieces(V, F, sp) -> dict:
+    """Every piece of a `sheet_pieces` result measured on its own (V (n,3) mm, F (m,3): the patch given).
+
+    Returns per-piece EL, EA, flipped, overlapping (as `measure`, against the 3D triangles
+    V[vert_origin]), the worst piece's EL and EA, the 3D-area-weighted EL and EA, the
+    totals of flips and overlaps, and ``partition``: True when every triangle of F is in
+    exactly one piece and each piece's unfolded triangles are F's triangles of that piece
+    in order (through vert_origin); else ``partition_error`` says what is wrong.
+    """
+    import numpy as np
+
+    piece = np.asarray(sp.piece, dtype=np.int64)
+    per, errors = [], []
+    if piece.shape != (len(F),):
+        errors.append(f"piece has shape {piece.shape}, F has {len(F)} triangles")
+    elif len(sp.unfoldings) and (piece.min() < 0 or piece.max() >= len(sp.unfoldings)):
+        errors.append(f"piece labels {piece.min()}..{piece.max()} for {len(sp.unfoldings)} unfoldings")
+    for j, u in enumerate(sp.unfoldings):
+        vo = np.asarray(u.vert_origin, dtype=np.int64)
+        m = measure(V[vo], u.F, u.UV)
+        m["faces"] = int(len(u.F))
+        m["area_mm2"] = float(triangle_areas(V[vo], u.F).sum())
+        per.append(m)
+        if not errors:
+            mine = np.nonzero(piece == j)[0]
+            if len(mine) != len(u.F) or not np.array_equal(vo[u.F], F[mine]):
+                errors.append(f"piece {j}: its {len(u.F)} unfolded triangles are not the {len(mine)} source "
+                              "triangles labelled with it")
+    out = {"per_piece": per, "partition": not errors, "partition_error": "; ".join(errors)}
+    if per:
+        w = np.array([m["area_mm2"] for m in per])
+        w = w / w.sum() if w.sum() > 0 else np.full(len(per), 1.0 / len(per))
+        out.update(worst_EL=max(m["EL"] for m in per), worst_EA=max(m["EA"] for m in per),
+                   EL=float(sum(wi * m["EL"] for wi, m in zip(w, per))),
+                   EA=float(sum(wi * m["EA"] for wi, m in zip(w, per))),
+                   flipped=int(sum(m["flipped"] for m in per)), overlaps=int(sum(m["overlaps"] for m in per)))
+    return out
+
+
+def run_sheet_pieces(fn, V, F, repeat: int, max_el: float) -> dict:
+    """Ours with refinement: `sheet_pieces(V, F, max_el)`, best wall time of `repeat`, measured piece by piece."""
+    times, sp = [], None
+    for _ in range(repeat):
+        gc.collect()
+        t0 = time.perf_counter()
+        sp = fn(V, F, max_el=max_el)
+        times.append(time.perf_counter() - t0)
+    row = {"method": f"ours sheet_pieces(max_el={max_el:g})", "seconds": min(times), "runs_s": times,
+           "pieces": len(sp.unfoldings), "darts": len(sp.darts), "splits": len(sp.splits), "met": bool(sp.met),
+           "reason": sp.reason, "own_seconds": float(getattr(sp, "seconds", float("nan")))}
+    row.update(measure_pieces(V, F, sp))
+    return row
+
+
+def run_unrefined(V, F, repeat: int) -> dict:
+    """Ours without refinement: `unfold_patch(V, F)` (the default), best of `repeat`, one piece."""
+    import numpy as np
+
+    from bolus_addon.core.unfold import unfold_patch
+
+    times = []
+    for _ in range(repeat):
+        gc.collect()
+        t0 = time.perf_counter()
+        u = unfold_patch(V, F)
+        times.append(time.perf_counter() - t0)
+    row = {"method": "ours unfold_patch (no refinement)", "seconds": min(times), "runs_s": times,
+           "hopeless": bool(getattr(u, "hopeless", False)), "angle_deficit": float(getattr(u, "angle_deficit", 0.0)),
+           "angle_excess": float(getattr(u, "angle_excess", 0.0)), "warnings": list(u.warnings)}
+    row.update(measure(V[np.asarray(u.vert_origin)], u.F, u.UV))
+    return row
+
+
+def slim_methods(bpy, cut, repeat: int) -> dict:
+    """SLIM-10 and SLIM-100 (`run_blender`) on the cut disk; a failure becomes an error entry."""
+    clean_scene(bpy)
+    ob = build_object(bpy, cut)
+    out = {}
+    for key, M, iters in BLENDER_RUNS:
+        if key not in HARD_SLIM_KEYS:
+            continue
+        try:
+            out[key] = run_blender(bpy, ob, cut, M, repeat, iters, key)
+        except Exception as exc:
+            out[key] = {"method": f"blender {key}", "error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
+            if bpy.context.object is not None and bpy.context.object.mode != "OBJECT":
+                bpy.ops.object.mode_set(mode="OBJECT")
+    clean_scene(bpy)
+    return out
+
+
+def slim_rows(patches: list[dict], repeat: int = 3) -> list[dict]:
+    """SLIM-10 and SLIM-100 on every patch (for bench/hard_patches.py's README): [{patch, SLIM-10, SLIM-100}]."""
+    import bpy
+    import numpy as np
+
+    from bolus_addon.core.cutting import cut_to_disk
+
+    with captured_output():
+        clean_scene(bpy)
+        bpy.context.scene.unit_settings.system = "METRIC"
+        bpy.context.scene.unit_settings.scale_length = 0.001
+        warm_up(bpy)
+    rows = []
+    for p in patches:
+        if "error" in p:
+            continue
+        cut = cut_to_disk(np.asarray(p["V"], dtype=np.float64), np.asarray(p["F"], dtype=np.int64))
+        rows.append({"patch": p["name"], **slim_methods(bpy, cut, repeat)})
+        print(f"  {p['name']}: " + "; ".join(f"{k} {el_ea(rows[-1][k])} % in {sec(rows[-1][k])} s"
+                                             for k in HARD_SLIM_KEYS))
+    return rows
+
+
+def bench_hard_patch(bpy, patch: dict, args, fn) -> dict:
+    """One hard patch: ours without and with refinement beside SLIM-10 / SLIM-100 on the same cut disk."""
+    import numpy as np
+
+    from bolus_addon.core.cutting import cut_to_disk
+
+    V, F = np.asarray(patch["V"], dtype=np.float64), np.asarray(patch["F"], dtype=np.int64)
+    cut = cut_to_disk(V, F)
+    print(f"\n== {patch['name']}: {len(F)} triangles, {len(V)} vertices; {patch.get('how', '')}")
+    row = {"patch": patch["name"], "how": patch.get("how", ""), "faces": int(len(F)), "vertices": int(len(V)),
+           "was_cut": bool(cut.was_cut), "methods": {}}
+    methods = row["methods"]
+    try:
+        methods["unrefined"] = run_unrefined(V, F, args.repeat)
+    except Exception as exc:
+        methods["unrefined"] = {"method": "ours unfold_patch", "error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
+    if fn is None:
+        methods["refined"] = {"method": "ours sheet_pieces", "error": "core.sheet_pieces does not exist yet"}
+    else:
+        try:
+            methods["refined"] = run_sheet_pieces(fn, V, F, args.repeat, args.max_el)
+        except Exception as exc:
+            methods["refined"] = {"method": "ours sheet_pieces",
+                                  "error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
+    methods.update(slim_methods(bpy, cut, args.repeat))
+    hard_judge(row, args.max_el)
+    for m in methods.values():
+        if "error" in m:
+            print(f"   {m['method']}: ERROR {m['error']}")
+    r = methods.get("refined", {})
+    if "worst_EL" in r:
+        print(f"   refined: {r['pieces']} pieces, {r['darts']} darts, {r['splits']} splits, worst EL / EA "
+              f"{pct(r['worst_EL'])} / {pct(r['worst_EA'])} %, f/o {r['flipped']}/{r['overlaps']}, "
+              f"{r['seconds']:.2f} s; met {r['met']}" + (f" ({r['reason']})" if r.get("reason") else "")
+              + ("" if r["partition"] else f"; PARTITION BROKEN: {r['partition_error']}"))
+    u = methods.get("unrefined", {})
+    if "EL" in u:
+        print(f"   unrefined: EL / EA {el_ea(u)} %, f/o {fo(u)}, {u['seconds']:.2f} s"
+              + (" (hopeless)" if u.get("hopeless") else ""))
+    for k in HARD_SLIM_KEYS:
+        m = methods.get(k, {})
+        if "EL" in m:
+            print(f"   {k}: EL / EA {el_ea(m)} % (EL-optimal scale {el_ea(m, 'el_optimal')}), f/o {fo(m)}, "
+                  f"{m['seconds']:.2f} s")
+    return row
+
+
+def hard_judge(row: dict, max_el: float) -> None:
+    """The issue's targets on one patch: every piece EL <= max_el and EA < 3 %, 0 flips, 0 overlaps, every
+    source face in exactly one piece; time (with refinement) <= 2x SLIM-100."""
+    r, s100 = row["methods"].get("refined", {}), row["methods"].get("SLIM-100", {})
+    if "worst_EL" in r:
+        row.update(met_EL=bool(r["worst_EL"] <= max_el + 1e-12), met_EA=bool(r["worst_EA"] < HARD_TARGET_EA),
+                   met_valid=bool(r["flipped"] == 0 and r["overlaps"] == 0 and r["partition"]))
+    if "seconds" in r and "seconds" in s100:
+        row["ratio_time"] = ratio(r["seconds"], s100["seconds"])
+        row["met_time"] = bool(row["ratio_time"] <= HARD_TARGET_TIME)
+    u = row["methods"].get("unrefined", {})
+    if "seconds" in u and "seconds" in s100:
+        row["ratio_time_unrefined"] = ratio(u["seconds"], s100["seconds"])
+
+
+def hard_table(rows: list[dict]) -> Table:
+    t = Table([("patch", "<"), ("faces", ">"), ("unrefined EL / EA %", ">"), ("f/o", ">"), ("s", ">"),
+               ("pieces", ">"), ("darts", ">"), ("splits", ">"), ("worst piece EL / EA %", ">"),
+               ("area-wtd EL / EA %", ">"), ("f/o", ">"), ("s", ">"), ("met", "<"),
+               ("SLIM-10 EL / EA %", ">"), ("s", ">"), ("SLIM-100 EL / EA %", ">"), ("f/o", ">"), ("s", ">"),
+               ("time / SLIM-100", ">")])
+    for row in rows:
+        if "error" in row:
+            t.add_error(row["patch"], row["error"])
+            continue
+        m = row["methods"]
+        u, r, s10, s100 = (m.get(k, {}) for k in ("unrefined", "refined", "SLIM-10", "SLIM-100"))
+        name = row["patch"] + (" (H)" if u.get("hopeless") else "")
+        if "worst_EL" in r:
+            ok = all(row.get(k) for k in ("met_EL", "met_EA", "met_valid"))
+            ref = [str(r["pieces"]), str(r["darts"]), str(r["splits"]), f"{pct(r['worst_EL'])} / {pct(r['worst_EA'])}",
+                   f"{pct(r['EL'])} / {pct(r['EA'])}", f"{r['flipped']}/{r['overlaps']}", sec(r),
+                   ("yes" if ok else "no") + ("" if r["partition"] else " (partition broken)")]
+        else:
+            ref = ["n/a"] * 7 + [r.get("error", "n/a")[:60]]
+        t.add(name, f"{row['faces']:,}", el_ea(u), fo(u), sec(u), *ref, el_ea(s10), sec(s10), el_ea(s100),
+              fo(s100), sec(s100), f"{row['ratio_time']:.2f}" if "ratio_time" in row else "n/a")
+    return t
+
+
+def hard_target_line(rows: list[dict], max_el: float) -> str:
+    judged = [r for r in rows if "met_EL" in r]
+    timed = [r for r in rows if "ratio_time" in r]
+    if not judged:
+        return ("Targets not judged: no patch has figures with refinement (`core.sheet_pieces` "
+                + ("missing)." if sheet_pieces_function() is None else "failed on every patch)."))
+    n = len(judged)
+    out = (f"Targets (every piece EL <= {100 * max_el:g} % and EA < {100 * HARD_TARGET_EA:g} %, 0 flips, 0 "
+           f"overlaps, every source face in one piece; time <= {HARD_TARGET_TIME:g}x SLIM-100): EL on "
+           f"{sum(r['met_EL'] for r in judged)} of {n} patches, EA on {sum(r['met_EA'] for r in judged)} of {n}, "
+           f"valid (0 flips, 0 overlaps, partition) on {sum(r['met_valid'] for r in judged)} of {n}")
+    if timed:
+        worst = max(timed, key=lambda r: r["ratio_time"])
+        out += (f"; time on {sum(r['met_time'] for r in timed)} of {len(timed)} (worst {worst['ratio_time']:.2f}, "
+                f"{worst['patch']})")
+    worst_el = max(judged, key=lambda r: r["methods"]["refined"]["worst_EL"])
+    return out + (f". Worst piece EL {pct(worst_el['methods']['refined']['worst_EL'])} % ({worst_el['patch']}).")
+
+
+def hard_reasons(rows: list[dict]) -> list[str]:
+    """sheet_pieces' own account of every patch it did not meet the target on."""
+    out = []
+    for row in rows:
+        r = row.get("methods", {}).get("refined", {})
+        if "met" in r and not r["met"]:
+            out.append(f"{row['patch']}: {r.get('reason') or '(no reason given)'}")
+    return out
+
+
+def hard_legend(args) -> str:
+    return (f"unrefined = `unfold_patch(V, F)` (one piece, today's default; (H) = it flags the patch hopeless); "
+            f"refined = `sheet_pieces(V, F, max_el={args.max_el:g})` (darts at angle-deficit points, splits through "
+            "angle-excess points, until every piece meets max_el or the piece limit), every piece measured on its "
+            "own: worst piece and 3D-area-weighted EL / EA in % as SPEC measures them, f/o = flipped / overlapping "
+            "triangles summed over the pieces (overlaps within a piece; pieces are laid out apart); met = every "
+            f"piece EL <= {100 * args.max_el:g} % and EA < {100 * HARD_TARGET_EA:g} %, 0 flips, 0 overlaps, every "
+            "source triangle in exactly one piece. SLIM-10 / SLIM-100 = Blender's `uv.unwrap(method="
+            "'MINIMUM_STRETCH', iterations=10 / 100, margin=0)` on the patch cut to a disk (`cutting.cut_to_disk`), "
+            "the operator call only, at true-area scale (one piece, no darts). Times: best of "
+            f"{args.repeat} runs, wall clock, ours including its cuts. time / SLIM-100: refined / SLIM-100 "
+            f"(target <= {HARD_TARGET_TIME:g}). Patches: `bench/hard_patches.py` (its docstring says how each was "
+            "made)")
+
+
+def hard_markdown(rows: list[dict], args, argv, total_s: float | None = None) -> str:
+    out = [HARD_HEADING, "", benchutil.run_line("unfold_bench.py", argv), "", hard_legend(args) + ".", "",
+           hard_table(rows).markdown(), "", hard_target_line(rows, args.max_el)]
+    reasons = hard_reasons(rows)
+    if reasons:
+        out += ["", "Where the target was not met, `sheet_pieces` says:", ""] + [f"- {r}" for r in reasons]
+    how = [f"- {r['patch']}: {r['how']}" for r in rows if r.get("how")]
+    if how:
+        out += ["", "<details><summary>How each patch was made</summary>", ""] + how + ["", "</details>"]
+    if total_s is not None:
+        out += ["", f"_This section: {total_s:.0f} s._"]
+    return "\n".join(out)
+
+
+def replace_markdown_section(path, heading: str, text: str) -> None:
+    """Put `text` (starting with `heading`) into the markdown file in place of the section under the same
+    heading (up to the next heading of the same or a higher level), or append it when there is none."""
+    from pathlib import Path
+
+    p = Path(path)
+    old = p.read_text(encoding="utf-8") if p.exists() else ""
+    lines = old.splitlines()
+    level = len(heading) - len(heading.lstrip("#"))
+    start = next((i for i, ln in enumerate(lines) if ln.strip() == heading.strip()), None)
+    if start is None:
+        benchutil.append_markdown(path, text)
+        return
+    end = start + 1
+    while end < len(lines):
+        s = lines[end]
+        if s.startswith("#") and len(s) - len(s.lstrip("#")) <= level and s[len(s) - len(s.lstrip("#")):][:1] == " ":
+            break
+        end += 1
+    new = lines[:start] + text.strip("\n").splitlines() + ([""] if end < len(lines) else []) + lines[end:]
+    p.write_text("\n".join(new) + "\n", encoding="utf-8")
+    print(f"section '{heading}' replaced in {p}")
+
+
+def hard_patch_list(args) -> list[dict]:
+    """The hard patches: loaded from --hard-dir, or made by bench/hard_patches.py; filtered by --only."""
+    import hard_patches
+
+    if args.hard_dir:
+        patches = hard_patches.load_saved(args.hard_dir)
+        print(f"hard patches: {len(patches)} loaded from {args.hard_dir}")
+    else:
+        print("hard patches (bench/hard_patches.py):")
+        patches = hard_patches.make_hard_patches(args.only or None, log=print)
+    if args.only:
+        patches = [p for p in patches if any(o in p["name"] for o in args.only)]
+    return patches
+
+
+def run_hard(bpy, args) -> list[dict]:
+    fn = sheet_pieces_function()
+    if fn is None:
+        print("core.sheet_pieces does not exist yet: ours with refinement is n/a")
+    rows = []
+    for patch in hard_patch_list(args):
+        if "error" in patch:
+            rows.append({"patch": patch["name"], "error": patch["error"]})
+            continue
+        try:
+            rows.append(bench_hard_patch(bpy, patch, args, fn))
+        except Exception as exc:
+            rows.append(benchutil.error_row("patch", patch["name"], exc))
+            clean_scene(bpy)
+    return rows
+
+
+def print_hard(rows: list[dict], args) -> None:
+    print(f"\nHard patches: darts and splits. {hard_legend(args)}.")
+    print(hard_table(rows).text())
+    print(hard_target_line(rows, args.max_el))
+    for r in hard_reasons(rows):
+        print("  not met: " + r)
+
+
 # ----------------------------------------------------------------------------- main
 
 
@@ -889,6 +1236,15 @@ def main(argv=None) -> int:
                     help="seconds the explicit integrator's steps may take per patch (sets max_iter; default 50)")
     ap.add_argument("--no-ablation", dest="ablation", action="store_false",
                     help="leave out the ablation's stages (a') to (c)")
+    ap.add_argument("--hard-only", action="store_true",
+                    help="run only the section 'Hard patches: darts and splits' (issue 12); with --markdown it "
+                         "replaces that section of the file (or appends it)")
+    ap.add_argument("--no-hard", dest="hard", action="store_false", help="leave out the hard patches' section")
+    ap.add_argument("--hard-dir", metavar="DIR",
+                    help="load the hard patches from DIR (.npz written by bench/hard_patches.py --write DIR) "
+                         "instead of making them")
+    ap.add_argument("--max-el", type=float, default=HARD_MAX_EL,
+                    help=f"sheet_pieces' max_el on the hard patches, a fraction (default {HARD_MAX_EL:g})")
     args = ap.parse_args(argv)
     args.repeat = max(1, args.repeat)
     if args.ablation and ablation_missing():
@@ -915,6 +1271,8 @@ def main(argv=None) -> int:
         bpy.context.scene.unit_settings.system = "METRIC"
         bpy.context.scene.unit_settings.scale_length = 0.001  # 1 unit = 1 mm (unwrap does not care)
         warm_up(bpy)
+    if args.hard_only:
+        return main_hard(bpy, args, argv, t_start)
     patches = make_patches(args.quick)
     if args.only:
         patches = [p for p in patches if any(o in p["name"] for o in args.only)]
@@ -928,8 +1286,14 @@ def main(argv=None) -> int:
         except Exception as exc:
             rows.append(benchutil.error_row("patch", patch["name"], exc))
             clean_scene(bpy)
+    hard_rows, t_hard = [], time.perf_counter()
+    if args.hard:
+        hard_rows = run_hard(bpy, args)
+    t_hard = time.perf_counter() - t_hard
     total = time.perf_counter() - t_start
     print_summary(rows, args)
+    if args.hard:
+        print_hard(hard_rows, args)
     benchutil.finish(args, {
         "quick": args.quick,
         "repeat": args.repeat,
@@ -941,7 +1305,29 @@ def main(argv=None) -> int:
         if args.ablation else None,
         "units": "EL, EA fractions (not %); seconds wall clock; lengths mm",
         "patches": rows,
+        "hard": hard_payload(hard_rows, args) if args.hard else None,
     }, total, markdown(rows, args, argv))
+    if args.hard and args.markdown:
+        replace_markdown_section(args.markdown, HARD_HEADING, hard_markdown(hard_rows, args, argv, t_hard))
+    return 0
+
+
+def hard_payload(rows: list[dict], args) -> dict:
+    return {"max_el": args.max_el, "targets": {"piece_EL": args.max_el, "piece_EA_below": HARD_TARGET_EA,
+                                               "flips": 0, "overlaps": 0, "time_ratio_slim100": HARD_TARGET_TIME},
+            "sheet_pieces_available": sheet_pieces_function() is not None, "patches": rows}
+
+
+def main_hard(bpy, args, argv, t_start: float) -> int:
+    """--hard-only: the hard patches' section alone."""
+    rows = run_hard(bpy, args)
+    total = time.perf_counter() - t_start
+    print_hard(rows, args)
+    md, args.markdown = args.markdown, None  # finish() appends; this section replaces its old copy instead
+    benchutil.finish(args, {"repeat": args.repeat, "units": "EL, EA fractions (not %); seconds wall clock; mm",
+                            "hard": hard_payload(rows, args)}, total)
+    if md:
+        replace_markdown_section(md, HARD_HEADING, hard_markdown(rows, args, argv, total))
     return 0
 
 
