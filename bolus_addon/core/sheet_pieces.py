@@ -1,0 +1,666 @@
+"""Darts and splits: a patch made into sheet pieces that meet a length-error target (issue 12 points 1, 2).
+
+A patch whose pattern stretches more than ``max_el`` (EL, eq. 3-30) is refined, the
+remedy chosen by the sign of its curvature (`piece_advice`, seed 4.1.1, eqs. 4-1..4-4):
+
+* angle deficit (nose tip, chin: theta < 2 pi): a DART, the shortest path along mesh
+  edges (Dijkstra on edge lengths) from the piece's boundary to the vertex of largest
+  diffused deficit, through interior vertices only; the piece is cut along it
+  (`cutting.split_along_edges`) and the cut opens into a V in the pattern;
+* angle excess (grooves, pocket rims: theta > 2 pi): a SPLIT, boundary -> worst excess
+  vertex w -> boundary: the shortest interior path from w to the boundary, then the
+  shortest one from w with the first leg's vertices blocked that ends on the same
+  boundary loop at least `SPLIT_MIN_ANGLE_DEG` away from the first leg's end as seen
+  from w (so the two legs leave on opposite sides); the two sides become separate pieces.
+
+The loop (`sheet_pieces`): every piece is judged first from its angle sums and a cheap
+trial unfolding (conformal start, `TRIAL_ITERS` L-BFGS iterations, one L1 refinement
+round, no overlap correction); a piece that clearly misses is refined at once, the
+others get the full `unfold.unfold_patch` and are refined only if that misses (EL >
+max_el, EA > `EA_PER_EL` max_el, flipped or overlapping triangles).  The worst piece is
+refined first.  Its candidates are the `CANDIDATES` strongest local extremes of the
+diffused defect; the remedy its kind calls for is tried first (deficit: dart, then
+split; excess or flat: split, then dart), each candidate in turn, and the FIRST change
+whose trial lowers the piece's score max(EL / max_el, EA / (EA_PER_EL max_el)) by at
+least `MIN_GAIN` is kept; if none does, the piece is left as it is and the reason
+recorded.  Limits: `MAX_PIECES` pieces per patch, `MAX_DARTS` darts per piece; a split
+whose smaller side has less than `MIN_SPLIT_SHARE` of the piece's area or fewer than
+`MIN_PIECE_TRIANGLES` triangles is refused.  Every final piece gets exactly one full
+unfolding (none is repeated unless a piece changes).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components, dijkstra
+
+from .cutting import boundary_loops, cut_to_disk, split_along_edges
+from .errors import BolusError
+from .initial_unfolding import conformal_unfolding
+from .measures import length_area_errors
+from .overlap import signed_areas
+from .piece_advice import EXCESS_SHARE, diffused_defect
+from .refine import refine_lengths_l1
+from .relax import relax_lbfgs
+from .saliency import DEFAULT_SMOOTHING_MM
+from .springs import build_springs
+from .topology import MeshTopology, check_mesh, submesh
+from .unfold import Unfolding, unfold_patch
+
+__all__ = ["Dart", "Split", "SheetPieces", "sheet_pieces", "iter_sheet_pieces", "MAX_PIECES", "MAX_DARTS",
+           "EA_PER_EL", "MIN_MAX_EL"]
+
+#: pieces per patch at most (splits stop there)
+MAX_PIECES = 8
+#: darts per piece at most
+MAX_DARTS = 3
+#: EA target per EL target: the benchmark's target is EL <= 2 % with EA < 3 %, and an
+#: unfolding that spreads the length error evenly has EA about 1.3-1.5 x EL (60 degree cap
+#: 3.56 / 2.63 %, cone 7.2 / 9.0 %), so EA <= 1.5 max_el asks no more of the area than of the lengths
+EA_PER_EL = 1.5
+#: the smallest target (a fraction): 0.1 %; below it (but above 0) `sheet_pieces` refuses
+MIN_MAX_EL = 0.001
+#: the cheap trial: L-BFGS iterations from the conformal start and one L1 refinement round
+#: of `REFINE_TRIAL_ITERS` iterations.  Its EL was 1.05-1.26 x the full unfolding's (cone
+#: 9.1 / 7.2 %, saddle 3.3 / 2.9 %, half saddle 0.82 / 0.67 %, 60 degree cap 3.75 / 3.56 %)
+#: at 15-25 % of the time
+TRIAL_ITERS = 40
+REFINE_TRIAL_ITERS = 10
+TRIAL_TOL = 1e-7
+TRIAL_FLIP_WEIGHT = 100.0  # the flip penalty of unfold's relaxation from a flip-free start
+#: a trial EL above TRIAL_SLACK x max_el misses the target for sure (trial / full <= 1.26
+#: measured): the full unfolding is skipped and the piece refined at once
+TRIAL_SLACK = 1.4
+#: the angle-sum test (early, before any unfolding): EL is at least about EL_PER_RAD x
+#: max(D, X), D / X the diffused deficit / excess in radians (where both are large they
+#: partly cancel: a cone blended into a saddle, D 2.5 and X 3.7 rad, unfolds to EL 1.9 %).
+#: Measured EL / max(D, X): cone (point deficit) 0.032, 60 and 30 degree caps 0.011 and
+#: 0.010, 100 x 100 saddle 0.011, its 50 x 100 half 0.0052 (a long thin piece has the
+#: least), the blend 0.0051; 0.004 stays under all of them
+EL_PER_RAD = 0.004
+#: below this total |defect| (rad) a piece is developable: no trial, the full unfold at once
+FLAT_RAD = 1e-3
+#: a change is kept when it lowers the piece's score by at least this share
+MIN_GAIN = 0.05
+#: candidate vertices (local extremes of the diffused defect) tried per remedy
+CANDIDATES = 3
+#: a split's smaller side must have at least this share of the piece's area ...
+MIN_SPLIT_SHARE = 0.08
+#: ... and at least this many triangles
+MIN_PIECE_TRIANGLES = 24
+#: the two legs of a split leave the worst vertex at least this angle apart (3D chords to their ends)
+SPLIT_MIN_ANGLE_DEG = 120.0
+PROGRESS_EVERY = 0.5  # seconds between progress calls in the loop
+
+
+@dataclass
+class Dart:
+    """A dart: piece (index into `SheetPieces.unfoldings`), path (k,) int vertex indices into
+    the V given, from the boundary vertex to the apex (apex last), defect: the diffused
+    angle defect at the apex (rad, > 0: deficit)."""
+
+    piece: int
+    path: np.ndarray
+    defect: float
+
+
+@dataclass
+class Split:
+    """A split: pieces (a, b) it separates (indices at the end of the run), path (k,) int
+    vertex indices into V along mesh edges from boundary to boundary, excess: the
+    diffused angle excess at its worst point (rad)."""
+
+    pieces: tuple
+    path: np.ndarray
+    excess: float
+
+
+@dataclass
+class SheetPieces:
+    """The pieces of one patch.
+
+    piece (m,) int: the piece of every triangle of F (0..p-1, every triangle in exactly one);
+    unfoldings: p `unfold.Unfolding`s, unfoldings[j].F row i = the i-th triangle of
+    np.nonzero(piece == j)[0], vert_origin = rows of the V given (dart and split vertices
+    appear more than once); darts, splits: what was cut; met: every piece has EL <= max_el,
+    EA <= EA_PER_EL max_el, 0 flipped, 0 overlapping triangles (always True with max_el 0:
+    no target); reason: "" when met, else the pieces that miss, their EL / EA and why;
+    seconds: wall time of the run.
+    """
+
+    piece: np.ndarray
+    unfoldings: list
+    darts: list
+    splits: list
+    met: bool
+    reason: str
+    seconds: float
+
+
+# ------------------------------------------------------------------ internals
+@dataclass
+class _Mesh:
+    """One piece with its darts cut open: Vc (k,3), Fc (f,3) (the piece's triangles in order),
+    origin (k,) row of the caller's V of every vertex, topo of (Vc, Fc)."""
+
+    Vc: np.ndarray
+    Fc: np.ndarray
+    origin: np.ndarray
+    topo: MeshTopology
+
+
+@dataclass
+class _Diagnosis:
+    """Angle sums of a piece: Kd (k,) the diffused defect 2 pi - theta (rad, interior
+    vertices of the cut piece), D / X its deficit / excess sums, kind from `piece_advice`."""
+
+    Kd: np.ndarray
+    D: float
+    X: float
+    kind: str
+
+
+@dataclass
+class _Piece:
+    faces: np.ndarray  # (f,) sorted triangle ids into F
+    mesh: _Mesh | None = None
+    diag: _Diagnosis | None = None
+    trial: tuple | None = None  # (EL, EA)
+    full: Unfolding | None = None
+    stuck: str = ""  # why no change helped ("" while refinement may still help)
+    ndarts: int = 0
+
+
+@dataclass
+class _DartRec:
+    path: np.ndarray  # V ids, boundary first, apex last
+    defect: float
+    face: int  # a triangle (id into F) on the dart's last edge
+
+
+@dataclass
+class _SplitRec:
+    path: np.ndarray
+    excess: float
+    faces: tuple  # one triangle id into F on each side, at the worst vertex
+
+
+class _Progress:
+    """progress(fraction, text), never decreasing: at every dart / split tried and the end (force),
+    else at most every PROGRESS_EVERY s."""
+
+    def __init__(self, progress):
+        self.progress = progress
+        self.last_t = -1e9
+        self.last_f = 0.0
+
+    def __call__(self, f: float, text: str, force: bool = False) -> None:
+        if self.progress is None:
+            return
+        now = time.perf_counter()
+        if not force and now - self.last_t < PROGRESS_EVERY:
+            return
+        self.last_t = now
+        self.last_f = max(self.last_f, min(max(float(f), 0.0), 1.0))
+        self.progress(self.last_f, text)
+
+    def sub(self, lo: float, hi: float, head: str):
+        """A progress callback for one unfold_patch call mapped into [lo, hi]."""
+        if self.progress is None:
+            return None
+        return lambda f, text: self(lo + (hi - lo) * min(max(float(f), 0.0), 1.0), f"{head}: {text}")
+
+
+def _check_max_el(max_el) -> float:
+    try:
+        x = float(max_el)
+    except (TypeError, ValueError):
+        raise BolusError(f"max_el must be 0 (off) or at least {100 * MIN_MAX_EL:g} %, got {max_el!r}") from None
+    if not np.isfinite(x) or x < 0 or 0 < x < MIN_MAX_EL:
+        raise BolusError(f"max_el must be 0 (off) or at least {100 * MIN_MAX_EL:g} % (a fraction: 0.02 = 2 %), "
+                         f"got {x:g}")
+    return x
+
+
+def _edge_keys(pairs: np.ndarray, n: int) -> np.ndarray:
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    return np.minimum(pairs[:, 0], pairs[:, 1]) * n + np.maximum(pairs[:, 0], pairs[:, 1])
+
+
+def _piece_mesh(V, F, faces, dart_edges) -> _Mesh:
+    """The piece's triangles F[faces] with every dart edge (d,2) (caller's V ids) inside it cut open."""
+    F_local, verts = submesh(F, faces)
+    topo = MeshTopology(V[verts], F_local)
+    if len(dart_edges):
+        n = len(V)
+        loc = np.full(n, -1, dtype=np.int64)
+        loc[verts] = np.arange(len(verts))
+        de = loc[np.asarray(dart_edges, dtype=np.int64)]
+        de = de[(de >= 0).all(axis=1)]
+        if len(de):
+            keys = topo.edges[:, 0] * len(verts) + topo.edges[:, 1]
+            q = _edge_keys(de, len(verts))
+            idx = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
+            hit = (keys[idx] == q) & (topo.edge_face_count[idx] == 2)
+            cut = topo.edges[idx[hit]]
+            if len(cut):
+                Fc, vo = split_along_edges(F_local, cut, topo)
+                origin = verts[vo]
+                return _Mesh(V[origin], Fc, origin, MeshTopology(V[origin], Fc))
+    return _Mesh(V[verts], F_local, verts, topo)
+
+
+def _diagnose(mesh: _Mesh, sigma_mm: float) -> _Diagnosis:
+    """Diffused defect of the (cut) piece and its kind (`piece_advice`, module doc there)."""
+    topo = mesh.topo
+    K = np.where(topo.interior_vertices, 2.0 * np.pi - topo.angle_sums, 0.0)
+    Kd = diffused_defect(topo, K, sigma_mm)
+    D, X = float(np.maximum(Kd, 0.0).sum()), float(np.maximum(-Kd, 0.0).sum())
+    kind = "flat" if D + X < FLAT_RAD else ("excess" if X >= EXCESS_SHARE * (D + X) else "deficit")
+    return _Diagnosis(Kd, D, X, kind)
+
+
+def _trial(mesh: _Mesh) -> tuple[float, float]:
+    """(EL, EA) of the cheap trial unfolding (module doc): conformal start, a short relaxation
+    with the flip penalty, one short L1 refinement round; no overlap correction."""
+    cut = cut_to_disk(mesh.Vc, mesh.Fc)
+    topo = MeshTopology(cut.V, cut.F)
+    UV = conformal_unfolding(topo)
+    springs = build_springs(topo)
+    flip_free = not np.any(signed_areas(UV, topo.F) <= 0)
+    UV, _, _ = relax_lbfgs(UV, springs, max_iter=TRIAL_ITERS, tol=TRIAL_TOL, F=topo.F if flip_free else None,
+                           A0=topo.areas, flip_weight=TRIAL_FLIP_WEIGHT if flip_free else 0.0)
+    flip_free = not np.any(signed_areas(UV, topo.F) <= 0)
+    UV, _ = refine_lengths_l1(UV, springs, topo.edge_face_count.astype(np.float64), rounds=1,
+                              max_iter=REFINE_TRIAL_ITERS, F=topo.F if flip_free else None, A0=topo.areas)
+    return length_area_errors(cut.V, cut.F, UV)
+
+
+def _local_extremes(topo: MeshTopology, Kd: np.ndarray, sign: float, count: int) -> np.ndarray:
+    """Up to ``count`` interior vertices where sign * Kd is a positive local maximum, strongest first."""
+    s = sign * Kd
+    E = topo.edges
+    nb = np.full(topo.n, -np.inf)
+    np.maximum.at(nb, E[:, 0], s[E[:, 1]])
+    np.maximum.at(nb, E[:, 1], s[E[:, 0]])
+    ok = topo.interior_vertices & (s > 0) & (s >= nb)
+    idx = np.nonzero(ok)[0]
+    return idx[np.argsort(-s[idx], kind="stable")][:count]
+
+
+def _interior_graph(mesh: _Mesh, blocked=None) -> sp.csr_matrix:
+    """Directed edge-length graph: no edge leaves a boundary vertex (paths stop at the
+    boundary) and none touches a blocked vertex."""
+    topo = mesh.topo
+    E, L = topo.edges, np.maximum(topo.edge_lengths, 1e-12)
+    rows, cols, w = np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]], np.r_[L, L]
+    keep = ~topo.boundary_vertices[rows]
+    if blocked is not None:
+        keep &= ~blocked[rows] & ~blocked[cols]
+    return sp.csr_matrix((w[keep], (rows[keep], cols[keep])), shape=(topo.n, topo.n))
+
+
+def _path_to(pred: np.ndarray, t: int) -> np.ndarray:
+    """[t, ..., source] from a Dijkstra predecessor array."""
+    path = [int(t)]
+    while pred[path[-1]] >= 0:
+        path.append(int(pred[path[-1]]))
+    return np.asarray(path, dtype=np.int64)
+
+
+def _dart_path(mesh: _Mesh, apex: int) -> np.ndarray | None:
+    """Shortest interior path (local ids) boundary vertex -> apex, or None."""
+    bnd = mesh.topo.boundary_vertices
+    dist, pred = dijkstra(_interior_graph(mesh), indices=apex, return_predecessors=True)
+    d = np.where(bnd & np.isfinite(dist), dist, np.inf)
+    if not np.isfinite(d).any():
+        return None
+    return _path_to(pred, int(np.argmin(d)))  # boundary ... apex
+
+
+def _split_path(mesh: _Mesh, w: int) -> np.ndarray | None:
+    """Boundary -> w -> boundary (local ids), the legs leaving on opposite sides (module doc), or None."""
+    topo, Vc = mesh.topo, mesh.Vc
+    bnd = topo.boundary_vertices
+    dist, pred = dijkstra(_interior_graph(mesh), indices=w, return_predecessors=True)
+    d = np.where(bnd & np.isfinite(dist), dist, np.inf)
+    if not np.isfinite(d).any():
+        return None
+    leg1 = _path_to(pred, int(np.argmin(d)))  # b1 ... w
+    b1 = int(leg1[0])
+    loop = next(lp for lp in boundary_loops(mesh.Fc, topo) if b1 in set(lp.tolist()))
+    blocked = np.zeros(topo.n, dtype=bool)
+    blocked[leg1[:-1]] = True
+    dist2, pred2 = dijkstra(_interior_graph(mesh, blocked), indices=w, return_predecessors=True)
+    cand = np.unique(loop)
+    cand = cand[np.isfinite(dist2[cand]) & ~blocked[cand]]
+    if not len(cand):
+        return None
+    u1 = Vc[b1] - Vc[w]
+    u = Vc[cand] - Vc[w]
+    cosang = u @ u1 / np.maximum(np.linalg.norm(u, axis=1) * np.linalg.norm(u1), 1e-300)
+    for limit in (SPLIT_MIN_ANGLE_DEG, 90.0):
+        ok = cosang <= np.cos(np.radians(limit))
+        if ok.any():
+            b2 = int(cand[ok][np.argmin(dist2[cand[ok]])])
+            leg2 = _path_to(pred2, b2)[::-1]  # w ... b2
+            return np.r_[leg1, leg2[1:]]
+    return None
+
+
+def _split_faces(mesh: _Mesh, path: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """(side (f,) bool of the cut piece's triangles, edge ids of the path) if the path
+    separates the piece into exactly two parts, else None."""
+    topo = mesh.topo
+    n = topo.n
+    keys = topo.edges[:, 0] * n + topo.edges[:, 1]
+    q = _edge_keys(np.stack([path[:-1], path[1:]], 1), n)
+    eid = np.searchsorted(keys, q)
+    P, e = topo.face_adjacency_pairs, topo.face_adjacency_edges
+    keep = ~np.isin(e, eid)
+    G = sp.coo_matrix((np.ones(int(keep.sum())), (P[keep, 0], P[keep, 1])), shape=(topo.m, topo.m))
+    ncomp, comp = connected_components(G, directed=False)
+    if ncomp != 2:
+        return None
+    return comp == comp[0], eid
+
+
+def _score(EL: float, EA: float, max_el: float) -> float:
+    return max(EL / max_el, EA / (EA_PER_EL * max_el))
+
+
+def _meets(u: Unfolding, max_el: float) -> bool:
+    return bool(_score(u.EL, u.EA, max_el) <= 1.0 and u.flipped == 0 and u.overlaps == 0)
+
+
+class _Run:
+    """State of one `sheet_pieces` call."""
+
+    def __init__(self, V, F, max_el, max_pieces, sigma_mm, method, refine_rounds, progress):
+        self.V, self.F = V, F
+        self.max_el, self.max_pieces, self.sigma = max_el, max_pieces, sigma_mm
+        self.method, self.refine_rounds = method, refine_rounds
+        self.pr = _Progress(progress)
+        self.pieces: list[_Piece] = [_Piece(np.arange(len(F), dtype=np.int64))]
+        self.darts: list[_DartRec] = []
+        self.splits: list[_SplitRec] = []
+        self.changes = 0
+
+    # ---------------------------------------------------------- bookkeeping
+    @property
+    def dart_edges(self) -> np.ndarray:
+        if not self.darts:
+            return np.zeros((0, 2), dtype=np.int64)
+        return np.concatenate([np.stack([d.path[:-1], d.path[1:]], 1) for d in self.darts])
+
+    def fraction(self) -> float:
+        """Refinement progress estimate: changes made of the most there can be, up to 0.8."""
+        budget = max(self.max_pieces - 1 + MAX_DARTS, 1)
+        return 0.8 * min(self.changes / budget, 1.0)
+
+    def prepare(self, p: _Piece, dart_edges=None) -> _Piece:
+        """Mesh, diagnosis and (unless developable) trial of a piece."""
+        if p.mesh is None:
+            p.mesh = _piece_mesh(self.V, self.F, p.faces, self.dart_edges if dart_edges is None else dart_edges)
+        if p.diag is None:
+            p.diag = _diagnose(p.mesh, self.sigma)
+        if p.trial is None:
+            p.trial = (0.0, 0.0) if p.diag.kind == "flat" else _trial(p.mesh)
+        return p
+
+    def trial_score(self, p: _Piece) -> float:
+        return _score(*p.trial, self.max_el)
+
+    def clearly_misses(self, p: _Piece) -> bool:
+        """Early decision from the angle sums and the trial (module doc): skip the full unfold."""
+        bound = EL_PER_RAD * max(p.diag.D, p.diag.X)
+        return bound > self.max_el or p.trial[0] > TRIAL_SLACK * self.max_el
+
+    def unfold(self, p: _Piece, head: str, lo: float, hi: float) -> Unfolding:
+        """The one full unfolding of a piece (vert_origin into V); its progress mapped into [lo, hi]."""
+        if p.full is None:
+            u = unfold_patch(p.mesh.Vc, p.mesh.Fc, method=self.method, refine_rounds=self.refine_rounds,
+                             progress=self.pr.sub(lo, hi, head))
+            u.vert_origin = p.mesh.origin[u.vert_origin]
+            p.full = u
+        return p.full
+
+    def ok(self, p: _Piece) -> bool:
+        return p.full is not None and _meets(p.full, self.max_el)
+
+    # ------------------------------------------------------------ the loop
+    def run(self) -> None:
+        while True:
+            todo = []
+            for k, p in enumerate(self.pieces):
+                self.pr(self.fraction(), f"checking piece {k + 1} of {len(self.pieces)}")
+                self.prepare(p)
+                if p.full is None and not p.stuck and not self.clearly_misses(p):
+                    f = self.fraction()
+                    self.unfold(p, f"unfolding piece {k + 1} of {len(self.pieces)}", f, f)
+                if not self.ok(p) and not p.stuck:
+                    todo.append(p)
+            if not todo:
+                return
+            p = max(todo, key=lambda q: self.trial_score(q) if q.full is None else
+                    max(self.trial_score(q), _score(q.full.EL, q.full.EA, self.max_el)))
+            self.refine(p)
+
+    def refine(self, p: _Piece) -> None:
+        """One dart or split on piece p (module doc), or p marked stuck with the reason."""
+        k = self.pieces.index(p)
+        s0 = self.trial_score(p)
+        order = ("dart", "split") if p.diag.kind == "deficit" else ("split", "dart")
+        why = []
+        for remedy in order:
+            if remedy == "dart":
+                if p.ndarts >= MAX_DARTS:
+                    why.append(f"it has the most darts a piece may have ({MAX_DARTS})")
+                    continue
+                if self.try_darts(p, k, s0, why):
+                    return
+            else:
+                if len(self.pieces) >= self.max_pieces:
+                    why.append(f"the patch has the most pieces allowed ({self.max_pieces})")
+                    continue
+                if self.try_splits(p, k, s0, why):
+                    return
+        p.stuck = "; ".join(dict.fromkeys(why)) or "no dart or split lowered its error"
+
+    def try_darts(self, p: _Piece, k: int, s0: float, why: list) -> bool:
+        mesh, Kd = p.mesh, p.diag.Kd
+        cands = _local_extremes(mesh.topo, Kd, 1.0, CANDIDATES)
+        if not len(cands):
+            why.append("it has no angle deficit to put a dart at")
+            return False
+        for c, apex in enumerate(cands):
+            self.pr(self.fraction(), f"dart {p.ndarts + 1} on piece {k + 1} (candidate {c + 1})", force=True)
+            path = _dart_path(mesh, int(apex))
+            if path is None or len(path) < 2:
+                continue
+            gpath = mesh.origin[path]
+            edges = np.r_[self.dart_edges, np.stack([gpath[:-1], gpath[1:]], 1)]
+            q = _Piece(p.faces, ndarts=p.ndarts + 1)
+            try:
+                self.prepare(q, edges)
+            except BolusError:
+                continue
+            if self.trial_score(q) < (1.0 - MIN_GAIN) * s0:
+                f = int(p.faces[mesh.topo.edge_faces[self._edge_id(mesh, path[-2], path[-1]), 0]])
+                self.darts.append(_DartRec(gpath, float(Kd[apex]), f))
+                self.pieces[k] = q
+                self.changes += 1
+                return True
+        why.append(f"no dart at its {len(cands)} strongest deficit point(s) lowered its error")
+        return False
+
+    @staticmethod
+    def _edge_id(mesh: _Mesh, a: int, b: int) -> int:
+        n = mesh.topo.n
+        keys = mesh.topo.edges[:, 0] * n + mesh.topo.edges[:, 1]
+        return int(np.searchsorted(keys, min(a, b) * n + max(a, b)))
+
+    def try_splits(self, p: _Piece, k: int, s0: float, why: list) -> bool:
+        mesh, Kd = p.mesh, p.diag.Kd
+        # through the worst excess points first (a deficit piece whose darts did not help: its
+        # worst deficit points first, smaller pieces carry less of it), then those of the other sign
+        first = 1.0 if p.diag.kind == "deficit" else -1.0
+        cands = np.r_[_local_extremes(mesh.topo, Kd, first, CANDIDATES),
+                      _local_extremes(mesh.topo, Kd, -first, CANDIDATES)][:CANDIDATES]
+        small = False
+        for c, w in enumerate(cands):
+            self.pr(self.fraction(), f"split of piece {k + 1} (candidate {c + 1})", force=True)
+            path = _split_path(mesh, int(w))
+            if path is None:
+                continue
+            res = _split_faces(mesh, path)
+            if res is None:
+                continue
+            side, eid = res
+            A = mesh.topo.areas
+            share = min(A[side].sum(), A[~side].sum()) / A.sum()
+            if share < MIN_SPLIT_SHARE or min(side.sum(), (~side).sum()) < MIN_PIECE_TRIANGLES:
+                small = True
+                continue
+            qa, qb = _Piece(p.faces[side]), _Piece(p.faces[~side])
+            try:
+                self.prepare(qa)
+                self.prepare(qb)
+            except BolusError:
+                continue
+            if max(self.trial_score(qa), self.trial_score(qb)) < (1.0 - MIN_GAIN) * s0:
+                ef = mesh.topo.edge_faces[eid[int(np.nonzero(path == w)[0][0]) - 1]]
+                self.splits.append(_SplitRec(mesh.origin[path], float(max(-Kd[w], 0.0)),
+                                             (int(p.faces[ef[0]]), int(p.faces[ef[1]]))))
+                for q in (qa, qb):
+                    q.ndarts = self._darts_in(q)
+                self.pieces[k:k + 1] = [qa, qb]
+                self.changes += 1
+                return True
+        if small:
+            why.append(f"a split through its worst points would leave a piece under {100 * MIN_SPLIT_SHARE:g} % of "
+                       f"its area or {MIN_PIECE_TRIANGLES} triangles")
+        why.append(f"no split through its {len(cands)} worst point(s) lowered its error")
+        return False
+
+    def _darts_in(self, q: _Piece) -> int:
+        fs = set(q.faces.tolist())
+        return sum(d.face in fs for d in self.darts)
+
+    # ---------------------------------------------------------- the result
+    def result(self, t0: float) -> SheetPieces:
+        order = sorted(range(len(self.pieces)), key=lambda j: int(self.pieces[j].faces[0]))
+        pieces = [self.pieces[j] for j in order]
+        label = np.empty(len(self.F), dtype=np.int64)
+        for j, p in enumerate(pieces):
+            label[p.faces] = j
+        unf = []
+        for j, p in enumerate(pieces):
+            lo, hi = max(self.pr.last_f, 0.8 + 0.2 * j / len(pieces)), 0.8 + 0.2 * (j + 1) / len(pieces)
+            self.pr(lo, f"unfolding piece {j + 1} of {len(pieces)}", force=True)
+            unf.append(self.unfold(p, f"unfolding piece {j + 1} of {len(pieces)}", lo, hi))
+        darts = [Dart(int(label[d.face]), d.path, d.defect) for d in self.darts]
+        splits = [Split((int(label[s.faces[0]]), int(label[s.faces[1]])), s.path, s.excess) for s in self.splits]
+        bad = [j for j, u in enumerate(unf) if not _meets(u, self.max_el)]
+        reason = "; ".join(self._reason(j, pieces[j], unf[j]) for j in bad)
+        self.pr(1.0, "done", force=True)
+        return SheetPieces(label, unf, darts, splits, not bad, reason, time.perf_counter() - t0)
+
+    def _reason(self, j: int, p: _Piece, u: Unfolding) -> str:
+        what = [f"EL {100 * u.EL:.1f} %", f"EA {100 * u.EA:.1f} %"]
+        if u.flipped:
+            what.append(f"{u.flipped} flipped triangles")
+        if u.overlaps:
+            what.append(f"{u.overlaps} overlapping triangles")
+        why = p.stuck or "no further dart or split was tried"
+        return (f"piece {j + 1} has {', '.join(what)} (target EL {100 * self.max_el:g} %, EA "
+                f"{100 * EA_PER_EL * self.max_el:g} %): {why}")
+
+
+# ------------------------------------------------------------------ public
+def sheet_pieces(V, F, max_el: float = 0.02, *, max_pieces: int = MAX_PIECES, sigma_mm: float = DEFAULT_SMOOTHING_MM,
+                 method: str = "lbfgs", refine_rounds: int = 3, progress=None) -> SheetPieces:
+    """Unfold one patch into sheet pieces with darts and splits until every piece meets ``max_el``.
+
+    Parameters
+    ----------
+    V : (n,3) float mm; F : (m,3) int, one consistently oriented patch.
+    max_el : the EL target as a fraction (0.02 = 2 %; EA target `EA_PER_EL` x max_el);
+        0 = refinement off: one piece, exactly ``unfold_patch(V, F, method, refine_rounds)``.
+    max_pieces : pieces at most (splits stop there; darts: `MAX_DARTS` per piece).
+    sigma_mm : scale of the diffused angle defect (`piece_advice`) choosing dart or split.
+    method, refine_rounds : passed to `unfold.unfold_patch` for each final piece.
+    progress : progress(fraction in [0, 1], text) about every 0.5 s ("dart 2 on piece 1", ...).
+
+    Returns
+    -------
+    `SheetPieces` (module doc for the loop): when a piece misses the target within the
+    limits, met is False and reason names it with its EL / EA and why.
+
+    Raises `BolusError` for max_el < 0, not finite or in (0, 0.001), max_pieces < 1, sigma
+    < 0, and for the mesh problems `unfold_patch` refuses (NaN/inf, bad indices,
+    zero-area triangles, non-manifold edges, several parts, handles; named).  Needle
+    triangles (tiny angles, positive area) are unfolded like any other.
+    """
+    t0 = time.perf_counter()
+    max_el = _check_max_el(max_el)
+    if not (isinstance(max_pieces, (int, np.integer)) and max_pieces >= 1):
+        raise BolusError(f"max_pieces must be a whole number of at least 1, got {max_pieces!r}")
+    if not (np.isfinite(sigma_mm) and sigma_mm >= 0):
+        raise BolusError(f"sigma_mm must be a number >= 0, got {sigma_mm}")
+    V, F = check_mesh(V, F, "the patch", nondegenerate=False, min_faces=0)
+    if max_el == 0:
+        u = unfold_patch(V, F, method=method, refine_rounds=refine_rounds, progress=progress)
+        return SheetPieces(np.zeros(len(F), dtype=np.int64), [u], [], [], True, "", time.perf_counter() - t0)
+    check_mesh(V, F, "the patch", nondegenerate=True, manifold=True, min_faces=3)
+    run = _Run(V, F, max_el, int(max_pieces), float(sigma_mm), method, refine_rounds, progress)
+    run.run()
+    return run.result(t0)
+
+
+def iter_sheet_pieces(V, F, labels, max_el: float = 0.02, *, max_pieces: int = MAX_PIECES,
+                      sigma_mm: float = DEFAULT_SMOOTHING_MM, method: str = "lbfgs", refine_rounds: int = 3,
+                      progress=None):
+    """`sheet_pieces` for every patch of a labelled mesh, one after the other.
+
+    Parameters: V (n,3) mm, F (m,3), labels (m,) patch of every triangle (-1: none); the
+    rest as in `sheet_pieces`; progress(fraction, "patch k/n: <step>"), each patch weighted
+    by its triangle count.
+    Yields (index, count, `SheetPieces`) for every label 0..p-1 present, in order, with
+    SheetPieces.piece indexing np.nonzero(labels == label)[0] and every Dart / Split path
+    and Unfolding.vert_origin in the caller's vertex indices; reason names the patch.  A
+    patch's `BolusError` is raised again naming the patch.
+    """
+    _check_max_el(max_el)
+    V, F = check_mesh(V, F, "the mesh", nondegenerate=False)
+    labels = np.asarray(labels, dtype=np.int64)
+    if labels.shape != (len(F),):
+        raise BolusError(f"{labels.size} patch labels for {len(F)} triangles")
+    ids = np.unique(labels[labels >= 0])
+    sizes = np.array([np.count_nonzero(labels == p) for p in ids], dtype=np.float64)
+    before = np.concatenate([[0.0], np.cumsum(sizes)]) / max(sizes.sum(), 1.0)
+    for k, p in enumerate(ids):
+        F_local, verts = submesh(F, labels == p)
+        sub = None
+        if progress is not None:
+            lo, hi, head = before[k], before[k + 1], f"patch {k + 1}/{len(ids)}"
+
+            def sub(f, text, lo=lo, hi=hi, head=head):
+                progress(float(lo + (hi - lo) * min(max(f, 0.0), 1.0)), f"{head}: {text}")
+        try:
+            res = sheet_pieces(V[verts], F_local, max_el, max_pieces=max_pieces, sigma_mm=sigma_mm, method=method,
+                               refine_rounds=refine_rounds, progress=sub)
+        except BolusError as exc:
+            raise BolusError(f"patch {p}: {exc}") from exc
+        for u in res.unfoldings:
+            u.vert_origin = verts[u.vert_origin]
+        for d in res.darts:
+            d.path = verts[d.path]
+        for s in res.splits:
+            s.path = verts[s.path]
+        if res.reason:
+            res.reason = f"patch {p}: {res.reason}"
+        yield k, len(ids), res
