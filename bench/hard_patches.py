@@ -12,11 +12,10 @@ Every patch is made by the add-on's own core, the way a user gets it in Blender:
   geodesic disk of ``bolus.select_area`` around the nose tip, nostrils kept), then
   ``spectral.segment(V, F, 3, eta=5, smoothing_mm=3, rng=0, method="kmeans")`` (the segment
   operator's defaults) and every patch saved, on four heads nobody here tuned for:
-  nefertiti.obj (mm), demosthenes.obj (normalised: scaled by DEMOSTHENES_MM_PER_UNIT so that
-  its head, beard to crown about 1.2 units, is about 240 mm: a real head), ict_face_narrow.obj
-  (cm -> mm) and makehuman_face_patch.obj (dm -> mm).  The nose tip is the frontmost vertex
-  (largest z) of the face (demosthenes: of the band 1.35 < y < 1.55 units, below the brow and
-  above the moustache: its beard is further forward than its nose);
+  nefertiti.obj (mm), demosthenes.obj (normalised: scaled by DEMOSTHENES_MM_PER_UNIT = 145 so
+  that its eyes are 63 mm apart (0.44 units) and its nose tip about 50 mm below them: a real
+  head), ict_face_narrow.obj (cm -> mm) and makehuman_face_patch.obj (dm -> mm).  The nose tip
+  is the frontmost vertex (largest z) of each (checked on pictures of the disks);
 * ``nostril pocket``: the faces of the ICT nose disk (radius 40 mm) that
   ``treatment_area(..., exclude_cavities=True)`` leaves out as cavity (openness < 0.2), the
   largest connected piece with a ring of POCKET_RIM_MM of the surrounding skin: a deep pocket
@@ -43,8 +42,7 @@ NOSE_RADIUS_MM = 45.0
 CLEAN_NOSE_RADIUS_MM = 30.0
 POCKET_RIM_MM = 4.0
 FINGER_RADIUS_MM = 25.0
-DEMOSTHENES_MM_PER_UNIT = 200.0
-DEMOSTHENES_NOSE_BAND = (1.35, 1.55)  # units, y: below the brow, above the moustache
+DEMOSTHENES_MM_PER_UNIT = 145.0  # eyes 0.44 units apart (63 mm), nose tip 0.34 below them (about 50 mm)
 SEG_PATCHES = 3
 SEG_ETA = 5.0
 SEG_RNG = 0
@@ -52,7 +50,7 @@ SEG_RNG = 0
 #: (short name, file, mm per file unit, how the nose tip is found)
 HEADS = (
     ("nefertiti", "nefertiti.obj", 1.0, "largest z"),
-    ("demosthenes", "demosthenes.obj", DEMOSTHENES_MM_PER_UNIT, "largest z in the nose band"),
+    ("demosthenes", "demosthenes.obj", DEMOSTHENES_MM_PER_UNIT, "largest z"),
     ("ict", "ict_face_narrow.obj", 10.0, "largest z"),
     ("makehuman", "makehuman_face_patch.obj", 100.0, "largest z"),
 )
@@ -67,13 +65,10 @@ def load(fname: str, scale: float):
     return load_obj(path, scale)
 
 
-def nose_tip(name: str, V) -> int:
+def nose_tip(V) -> int:
+    """The frontmost vertex (largest z) of a head looking along +z."""
     import numpy as np
 
-    if name == "demosthenes":
-        lo, hi = (DEMOSTHENES_MM_PER_UNIT * b for b in DEMOSTHENES_NOSE_BAND)
-        band = (V[:, 1] > lo) & (V[:, 1] < hi)
-        return int(np.nonzero(band)[0][np.argmax(V[band, 2])])
     return int(np.argmax(V[:, 2]))
 
 
@@ -113,7 +108,7 @@ def nose_patches(short: str, fname: str, scale: float, tip_rule: str) -> list[di
     from bolus_addon.core.saliency import DEFAULT_SMOOTHING_MM
 
     V, F, _ = load(fname, scale)
-    tip = nose_tip(short, V)
+    tip = nose_tip(V)
     Vn, Fn, _ = disk(V, F, V[tip], NOSE_RADIUS_MM)
     how = (f"{fname} x{scale:g} -> mm, nose tip = vertex {tip} ({tip_rule}); treatment_area(radius "
            f"{NOSE_RADIUS_MM:g} mm, exclude_cavities=False): {len(Fn)} tri; spectral.segment(3, eta={SEG_ETA:g}, "
@@ -127,7 +122,7 @@ def nostril_pocket() -> list[dict]:
     from bolus_addon.core.topology import MeshTopology, submesh
 
     V, F, _ = load("ict_face_narrow.obj", 10.0)
-    tip = nose_tip("ict", V)
+    tip = nose_tip(V)
     Vd, Fd, area_d = disk(V, F, V[tip], NOSE_RADIUS_MM)
     # the same disk with the cavities left out: its cavity faces are the nostril pockets
     _, _, area = disk(V, F, V[tip], NOSE_RADIUS_MM, exclude_cavities=True)
@@ -306,7 +301,7 @@ def readme(path: Path, patches: list[dict], rows: list[dict], ours: dict | None 
     lines += ["", "ours = unfold_patch(V, F) today (one piece, no darts/splits, one run); H = it flags the patch "
               "hopeless; defic / exces = its angle_deficit / angle_excess (rad, summed over interior vertices).",
               "ict nose p1 / p2 are the two nostril pockets of that disk (mirror twins); 'nostril pocket' is the "
-              "deepest cavity with a 4 mm rim; demosthenes is a coarse scan (patches of 79-125 triangles).",
+              "deepest cavity with a 4 mm rim; demosthenes is a coarse scan (its nose patches have under 150 triangles).",
               "", "How each was made:"]
     lines += [f"  {p['name']}: {p.get('how', p.get('error'))}" for p in patches]
     path.write_text("\n".join(lines) + "\n")
