@@ -130,7 +130,15 @@ def test_marks_in_all_three_formats(tmp_path):
     for g in groups:
         texts = [t.text for t in g.iter("{http://www.w3.org/2000/svg}text")]
         assert LABEL in texts and "outer side up" in texts
-    # the dart's legs end at the apex: the cone's tip on paper
+    # the seam's number is not covered by the piece's label block
+    for g in groups[:2]:
+        num = g.find(".//svg:text[@class='seam-number']", NS)
+        nx, ny = float(num.get("x")), float(num.get("y")) - 0.35 * float(num.get("font-size"))
+        for t in g.findall("svg:text", NS):
+            x, y, size = float(t.get("x")), float(t.get("y")), float(t.get("font-size"))
+            half_w = 0.62 * size * len(t.text) / 2 + 0.5
+            assert not (abs(nx - x) < half_w and y - size - 0.5 < ny < y + 0.5), (t.text, nx, ny, x, y)
+    # the dart's legs end at one point on the V's bisector, just inside the opening
     ends = [np.array(leg.get("points").replace(",", " ").split(), float).reshape(-1, 2)[-1] for leg in legs]
     np.testing.assert_allclose(ends[0], ends[1])
     msp = dxf_doc(tmp_path / "m.dxf").modelspace()

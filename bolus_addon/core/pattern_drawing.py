@@ -67,6 +67,10 @@ FONT_LABEL_MM, FONT_METRICS_MM, FONT_NOTE_MM, FONT_TITLE_MM, FONT_MARK_MM = 5.0,
 FONT_SKIN_MM = 2.5
 #: a seam tick reaches this far each side of the outline; its number sits this far inside
 TICK_MM, NUMBER_INSET_MM = 2.5, 5.5
+#: a label keeps this far (mm, half a square's side) from a mark's number
+KEEP_OUT_MM = 3.5
+#: a dart's dashed legs are drawn this far inside its opening (so they do not hide under the cut line)
+DART_INSET_MM = 1.5
 #: a label never shrinks below this share of its size to fit a small piece
 LABEL_MIN_SCALE = 0.4
 #: label candidates: a LABEL_GRID x LABEL_GRID grid over the piece, and at most this many centroids
@@ -191,16 +195,23 @@ def _free_room(cand, A, B, axis: int) -> np.ndarray:
     return 2 * np.minimum(before, after)
 
 
-def _label_place(UV: np.ndarray, F: np.ndarray, loops: list[np.ndarray], text_w: float, text_h: float):
+def _label_place(UV: np.ndarray, F: np.ndarray, loops: list[np.ndarray], text_w: float, text_h: float,
+                 obstacles: list[np.ndarray] = ()):
     """Where to put a text block of text_w x text_h mm on the island: ``(point (2,), scale)``.
 
     Among the candidates where the text fits best (scale 1 if it fits, else shrunk to
     the room left and right, above and below the point, never below `LABEL_MIN_SCALE`)
-    the one nearest the outer loop's centroid is taken.
+    the one nearest the outer loop's centroid is taken.  ``obstacles``: clockwise loops
+    (k,2) the text keeps out of, like holes (the marks' numbers).
     """
-    A = np.concatenate(loops)
-    B = np.concatenate([np.roll(L, -1, axis=0) for L in loops])
+    A = np.concatenate(list(loops) + list(obstacles))
+    B = np.concatenate([np.roll(L, -1, axis=0) for L in list(loops) + list(obstacles)])
     cand, off = _label_candidates(UV, F, A, B, _centroid(loops[0]))
+    if len(obstacles):
+        free = winding_numbers(cand, A, B) == 1
+        if not free.any():
+            return _label_place(UV, F, loops, text_w, text_h)
+        cand, off = cand[free], off[free]
     fit = np.minimum(1.0, np.minimum(LABEL_FILL * _free_room(cand, A, B, 0) / max(text_w, 1e-9),
                                      LABEL_FILL * _free_room(cand, A, B, 1) / max(text_h, 1e-9)))
     best = np.flatnonzero(fit >= fit.max() * (1 - 1e-9))
@@ -318,12 +329,15 @@ def _piece(i: int, isl: dict, d: float, label: str):
     return UV, F, loops, seams, lines, int(pid) if pid is not None else i
 
 
-def _label_block(P: "Drawing", UV, F, loops, lines) -> list:
-    """Texts of the label lines as one block centred where it fits best inside the piece."""
+def _label_block(P: "Drawing", UV, F, loops, lines, keep_out=()) -> list:
+    """Texts of the label lines as one block centred where it fits best inside the piece,
+    away from the points ``keep_out`` [(2,)] (pattern mm: the marks' numbers)."""
     sizes = np.array([s for _, s, _, _ in lines])
     text_w = max(_text_w(t, s, b) for t, s, b, _ in lines)
     text_h = float((1.3 * sizes).sum())
-    c, k = _label_place(UV, F, loops, text_w, text_h)
+    r = KEEP_OUT_MM
+    square_cw = np.array([[-r, -r], [-r, r], [r, r], [r, -r]])
+    c, k = _label_place(UV, F, loops, text_w, text_h, [p + square_cw for p in keep_out])
     c = P.paper(c)[0]
     out, y = [], c[1] - k * text_h / 2
     for t, s, b, kind in lines:
@@ -342,10 +356,22 @@ def _seam_marks(P: "Drawing", mid, normal, number: int):
 
 
 def _dart_marks(P: "Drawing", UV, dart):
-    """The dart's two legs as dashed lines from the outline to the apex, "dart" inside the V."""
+    """The dart's two legs as dashed lines from the outline to the apex, `DART_INSET_MM` inside
+    the V's opening (on the cut line they would hide under it), "dart" inside the V."""
     apex = UV[dart.apex]
     a, b = UV[dart.leg_a[0]], UV[dart.leg_b[0]]
-    legs = [Stroke(P.paper(np.array([e, apex])), False, MARKS, "dart", MARK_STROKE_MM, True) for e in (a, b)]
+    ua, ub = a - apex, b - apex
+    la, lb = float(np.linalg.norm(ua)), float(np.linalg.norm(ub))
+    ends, tip = [a, b], apex
+    if la > 0 and lb > 0:
+        ua, ub = ua / la, ub / lb
+        bis = ua + ub
+        sin_half = 0.5 * float(np.linalg.norm(ua - ub))
+        if np.linalg.norm(bis) > 1e-9 and sin_half > 0 and DART_INSET_MM / sin_half < 0.5 * min(la, lb):
+            bis /= np.linalg.norm(bis)
+            tip = apex + bis * DART_INSET_MM / sin_half  # on the bisector, DART_INSET_MM from both legs
+            ends = [e + (tip - apex) for e in (a, b)]
+    legs = [Stroke(P.paper(np.array([e, tip])), False, MARKS, "dart", MARK_STROKE_MM, True) for e in ends]
     c = P.paper((a + b + apex) / 3)[0]
     return legs, Text("dart", np.array([c[0], c[1] + 0.35 * FONT_MARK_MM]), FONT_MARK_MM, "dart-label",
                       "middle", False, MARKS)
@@ -402,12 +428,17 @@ def pattern_drawing(pieces, marks=None, *, label: str = "", title: str = "", sea
     H = max(y_sq + TEST_SQUARE_MM, y_sq + 7.0 * len(notes)) + m
     P = Drawing(W, H, [], [], [], (m, m, m + content_w, m + content_h), (m, y_sq), {"ox": ox, "oy": oy},
                 title, label, d)
+    keep_out: dict[int, list] = {}
+    if marks is not None:
+        for s in marks.seams:
+            for pid, mid, nrm in ((s.piece_a, s.mid_a, s.normal_a), (s.piece_b, s.mid_b, s.normal_b)):
+                keep_out.setdefault(int(pid), []).append(np.asarray(mid) + NUMBER_INSET_MM * np.asarray(nrm))
     by_id = {}
     for UV, F, loops, seams, lines, pid in raw:
         dp = DrawnPiece(lines[0][0], pid,
                         [Stroke(P.paper(L), True, CUT, "cut", CUT_STROKE_MM) for L in loops],
                         [Stroke(P.paper(S), True, SEAM_ALLOWANCE, "seam", SEAM_STROKE_MM, True) for S in seams],
-                        _label_block(P, UV, F, loops, lines), pattern_cut=loops)
+                        _label_block(P, UV, F, loops, lines, keep_out.get(pid, [])), pattern_cut=loops)
         P.pieces.append(dp)
         by_id.setdefault(pid, dp)
     if marks is not None:
