@@ -7,6 +7,8 @@ Run from the repository root:
     .venv/bin/python bench/unfold_bench.py --json out/unfold_bench.json
     .venv/bin/python bench/unfold_bench.py --quick --only "nose p1" --only nostril   # some patches only
     .venv/bin/python bench/unfold_bench.py --markdown docs/benchmarks.md   # append the tables (make bench)
+    .venv/bin/python bench/unfold_bench.py --hard-only --markdown docs/benchmarks.md   # hard patches only
+    .venv/bin/python bench/unfold_bench.py --hard-only --hard-dir /tmp/h12_patches --only "ict nose"
 
 Every benchmark patch is first cut to a disk with ``cutting.cut_to_disk(V, F)``
 (a disk comes back unchanged).  In the same process and with exactly those seams:
@@ -67,6 +69,19 @@ subdivided once: ~43k triangles) and the closed toy ``fish closed`` (fish.obj sc
 to 150 mm, unfolded whole: it gets cut to a disk).  ``--quick`` leaves out the two
 big ones and the explicit integrator.
 Meshes come from ``<repo>/../shared/meshes`` (override with BOLUS_SHARED_MESHES).
+
+Hard patches: darts and splits (issue 12; ``--hard-only`` runs this section alone, ``--no-hard``
+leaves it out): the patches of ``bench/hard_patches.py`` (nose disks of four heads cut into 3
+by the segment operator's core, a nostril pocket, a finger tip, the clean ICT nose in 3; made
+in-process or loaded with ``--hard-dir`` from its saved .npz).  Per patch: ours without
+refinement (``unfold_patch(V, F)``, one piece), ours with refinement
+(``sheet_pieces(V, F, max_el=--max-el)``, default 0.02: darts and splits; every piece measured
+on its own against its own 3D triangles: worst piece and 3D-area-weighted EL / EA, flips and
+overlaps summed, and a check that every source triangle is in exactly one piece), beside
+SLIM-10 and SLIM-100 on the patch cut to a disk, as above.  Targets (the issue's): every piece
+EL <= max_el and EA < 3 %, 0 flips, 0 overlaps; time with refinement <= 2x SLIM-100.  With
+``--markdown`` the section "Hard patches: darts and splits" replaces its old copy in the file
+(or is appended).
 """
 from __future__ import annotations
 
