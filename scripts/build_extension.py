@@ -1,7 +1,7 @@
-"""Build installable extension zips that carry scipy, scikit-learn and manifold3d (`make extension-wheels`).
+"""Build installable extension zips that carry scipy, scikit-learn, manifold3d, ezdxf and fpdf2 (`make extension-wheels`).
 
 Blender ships numpy but not scipy, scikit-learn or manifold3d (the volume and boolean library of the
-printed bolus), which the add-on's core needs.
+printed bolus), nor ezdxf and fpdf2 (the DXF and PDF pattern export), which the add-on's core needs.
 Blender extensions can bundle Python wheels (manifest ``wheels = [...]``), one zip per
 platform.  Blender 4.2-5.0 run Python 3.11 and Blender 5.1+ Python 3.13, so every zip
 carries the wheels for both (cp311 and cp313); Blender installs the ones for its Python.
@@ -11,7 +11,9 @@ This script
    asked (linux-x64, macos-arm64, macos-x64, windows-x64) for both Pythons -- cp311 at the
    versions pinned in requirements.txt, cp313 at those in requirements-bpy52.txt -- and
    the pure-Python packages they need (joblib, cloudpickle, threadpoolctl, narwhals, at
-   the versions in the venv), into a cache folder;
+   the versions in the venv), and the pattern export's pure-Python wheels (py3-none-any:
+   ezdxf, fpdf2, fonttools, defusedxml, pyparsing, typing_extensions, at the versions in
+   requirements.txt; no Pillow), into a cache folder;
 2. stages the extension (manifest, root __init__.py, LICENSE, README.md, bolus_addon/)
    with those wheels, adding ``platforms`` and ``wheels`` to the staged manifest;
 3. runs Blender's own builder (from the bpy in the venv) with ``--split-platforms``:
@@ -54,6 +56,11 @@ PYTHONS = {
 }
 BINARY = ("scipy", "scikit-learn", "manifold3d")
 PURE = ("joblib", "cloudpickle", "threadpoolctl", "narwhals")
+#: the pattern export's libraries (issue 12): DXF with ezdxf, PDF with fpdf2, and what they need, as
+#: py3-none-any wheels at the versions pinned in requirements.txt (ezdxf and fonttools also publish
+#: compiled wheels; their pure ones run the same, only slower on huge drawings).  Not Pillow: fpdf2
+#: draws vectors and text without it (tests/test_core_pattern_export.py checks that).
+PURE_ANY = ("ezdxf", "fpdf2", "fonttools", "defusedxml", "pyparsing", "typing_extensions")
 
 
 def pinned(name: str, requirements: str = "requirements.txt") -> str:
@@ -81,10 +88,14 @@ def check_pins() -> dict[str, dict[str, str]]:
 
 
 def download(reqs: list[str], dest: Path, platform: str | None, python: str = "3.11") -> None:
+    """Download the wheels ``reqs`` for ``platform`` (None: this machine's; "any": only pure
+    py3-none-any wheels, even of packages that also publish compiled ones)."""
     cmd = [sys.executable, "-m", "pip", "download", "--quiet", "--disable-pip-version-check", "--no-deps",
-           "--only-binary=:all:", "--python-version", python, "--implementation", "cp", "-d", str(dest)]
-    if platform:
-        cmd += ["--platform", platform]
+           "--only-binary=:all:", "--python-version", python, "-d", str(dest)]
+    if platform == "any":
+        cmd += ["--platform", "any", "--implementation", "py", "--abi", "none"]
+    else:
+        cmd += ["--implementation", "cp"] + (["--platform", platform] if platform else [])
     if subprocess.call(cmd + reqs) != 0:
         raise SystemExit(f"could not download {' '.join(reqs)} for Python {python} on {platform or 'any platform'} "
                          "(no network?)")
@@ -169,14 +180,21 @@ if pat is not None:
             L0 += l0
     out["EL"] = L / L0
 import manifold3d  # the volume library of the printed bolus (core.solid)
-out["modules"] = {m: getattr(sys.modules.get(m), "__file__", None) for m in ("scipy", "sklearn", "manifold3d")}
+import importlib, os
+drawing = importlib.import_module("bl_ext.user_default.bolus.bolus_addon.core.pattern_drawing")
+tri = [{"UV": np.array([[0.0, 0], [40, 0], [0, 30]]), "F": [[0, 1, 2]], "label": "check"}]
+out["export"] = {ext: drawing.write_pattern(os.path.join(USER, "check." + ext), tri, page="A4")["pages"]
+                 for ext in ("svg", "dxf", "pdf")}
+out["modules"] = {m: getattr(sys.modules.get(m), "__file__", None)
+                  for m in ("scipy", "sklearn", "manifold3d", "ezdxf", "fpdf")}
 print("RESULT " + json.dumps(out))
 """
 
 
 
 #: what the extension's wheels bring; hidden from the Blender under test by `--check`
-BUNDLED_MODULES = ("scipy", "sklearn", "scikit_learn", "manifold3d", "joblib", "threadpoolctl", "narwhals", "cloudpickle")
+BUNDLED_MODULES = ("scipy", "sklearn", "scikit_learn", "manifold3d", "joblib", "threadpoolctl", "narwhals", "cloudpickle",
+                   "ezdxf", "fpdf", "fonttools", "defusedxml", "pyparsing", "typing_extensions")
 
 
 def _site_without_bundled(python: str, dest: Path) -> Path:
@@ -220,6 +238,8 @@ def installed_run_problems(res: dict, user: Path) -> list[str]:
         bad.append(f"operators not from the installed copy: {res['module_file']}")
     if res["segment"] != ["FINISHED"] or res["patch_labels"] != [0, 1]:
         bad.append(f"segment: {res['segment']}, bolus_patch values {res['patch_labels']}")
+    if res.get("export") != {"svg": 1, "dxf": 1, "pdf": 1}:
+        bad.append(f"pattern export (SVG, DXF, PDF): {res.get('export')}")
     if res["unfold"] != ["FINISHED"] or not res["pattern"]:
         bad.append(f"unfold: {res['unfold']}, pattern object {res['pattern']}")
     elif not (res["pattern_max_abs_z"] <= 1e-6 and res["pattern_faces_cover_source"] and res["EL"] < 0.02):
@@ -247,7 +267,8 @@ def check_zip(zip_path: Path, pythons: list[str]) -> int:
                 print(f"  FAILED {zip_path.name} with {python}:\n    " + "\n    ".join(bad))
             else:
                 print(f"  ok {zip_path.name} in bpy {res['bpy']} (Python {res['python']}, numpy {res['numpy']}): "
-                      f"segment and unfold finished, EL {res['EL']:.4f}, scipy, scikit-learn and manifold3d from the zip's wheels")
+                      f"segment and unfold finished, EL {res['EL']:.4f}, SVG/DXF/PDF written, scipy, scikit-learn, "
+                      "manifold3d, ezdxf and fpdf2 from the zip's wheels")
             failed += bool(bad)
     return int(failed > 0)
 
@@ -275,6 +296,7 @@ def main() -> int:
     folders.append(cache / "any")
     folders[-1].mkdir(exist_ok=True)
     download([f"{n}=={md.version(n)}" for n in PURE], folders[-1], None)
+    download([pinned(n) for n in PURE_ANY], folders[-1], "any")
 
     stage = ROOT / "build" / "stage"
     shutil.rmtree(stage, ignore_errors=True)

@@ -18,6 +18,7 @@ Text uses the PDF core font Helvetica (Latin-1; other characters print as "?").
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 
@@ -117,7 +118,9 @@ def _cross(pen: _Pen, x: float, y: float) -> None:
 def drawing_pdf(drawing: Drawing, page: str = "NONE") -> tuple[bytes, list]:
     """(PDF bytes, tiles [(row, col, x0, y0, w, h)]: the drawing's window (paper mm) on every page)."""
     try:
-        from fpdf import FPDF
+        with warnings.catch_warnings():  # fpdf2 warns that it cannot add images without Pillow: it adds none
+            warnings.filterwarnings("ignore", message="Pillow could not be imported")
+            from fpdf import FPDF
     except ImportError as exc:  # pragma: no cover - bundled with the add-on
         raise BolusError(f"PDF export needs the fpdf2 package, which is missing: {exc}") from None
     page = str(page or "NONE").upper()
