@@ -82,6 +82,35 @@ def test_plane_moves_every_vertex_by_half_t(sigma):
     np.testing.assert_allclose(np.linalg.norm(ms.V - V, axis=1), 3.0)
 
 
+def test_open_cylinder_mid_surface_right_up_to_the_border():
+    """Normals fitted linearly keep their change across the region's border: the mid-surface of
+    an open cylinder piece is (R + t/2) / R longer around, also on its border (heat-diffused
+    normals left the border edges 12 % short)."""
+    R, t = 30.0, 10.0
+    V, F = cylinder_piece(R, 1.5 * np.pi, 40.0, 108, 8)
+    ms = mid_surface(V, F, t)
+    assert not ms.clamped.any()
+    E = MeshTopology(V, F).edges
+    around = np.abs(V[E[:, 0], 2] - V[E[:, 1], 2]) < 1e-9
+    E = E[around]
+    ratio = np.linalg.norm(ms.V[E[:, 0]] - ms.V[E[:, 1]], axis=1) / np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    np.testing.assert_allclose(ratio, (R + t / 2) / R, rtol=0.01)
+
+
+def test_noisy_cap():
+    """0.15 mm of scanner-like noise: the mid-surface carries the skin's noise without amplifying
+    it and R_min stays near the cap's radius."""
+    R = 40.0
+    V, F = spherical_cap(R, 50, 5)  # 1.5 mm edges
+    V = V * (1 + np.random.default_rng(1).normal(0, 0.15, len(V)) / R)[:, None]
+    ms = mid_surface(V, F, 6.0)
+    assert not folded_triangles(V, ms.V, F).any() and not ms.clamped.any()
+    r = np.linalg.norm(ms.V, axis=1)
+    assert abs(r.mean() - (R + 3.0)) < 0.05 and r.std() < 0.17
+    (pb,) = piece_bending(V, F, np.zeros(len(F), dtype=int), 4.0, [0.0], 0.02)
+    assert 0.85 * R < pb.R_min_mm < 1.02 * R
+
+
 def test_zero_thickness_is_a_copy():
     V, F = height_field(lambda x, y: 0.003 * x * y, 8, 8)
     ms = mid_surface(V, F, 0.0)
@@ -123,7 +152,7 @@ def test_concave_offset_beyond_the_radius_is_clamped_without_flips(make):
     ms = mid_surface(V, F, t)
     interior = MeshTopology(V, F).interior_vertices
     assert ms.clamped[interior].all()
-    assert ms.offset.max() <= CLAMP_FRACTION * R * 1.05  # limited to half the local radius (curvature at sigma)
+    assert ms.offset.max() <= CLAMP_FRACTION * R * 1.1  # limited to half the local radius (curvature at sigma)
     assert ms.offset[interior].min() > 0.3 * R  # but not dropped
     ratio = signed_area_ratio(V, ms.V, F)
     assert ratio.min() > MIN_AREA_RATIO and not folded_triangles(V, ms.V, F).any()  # none flipped or collapsed
@@ -143,9 +172,9 @@ def test_flip_check_alone_leaves_no_flipped_triangle(make, monkeypatch):
     if make == "sphere":
         V, F = icosphere(3, 10.0)
         F, t = F[:, ::-1], 30.0
-    else:  # a 2 mm round trough in a plane, normals up: concave towards the offset side
-        V, F = height_field(lambda x, y: -np.sqrt(np.maximum(4.0 - x**2, 0.0)), 60, 6, 30.0)
-        t = 12.0
+    else:  # a 10 mm round trough in a plane, normals up: concave towards the offset side
+        V, F = height_field(lambda x, y: -np.sqrt(np.maximum(100.0 - x**2, 0.0)), 80, 6, 60.0)
+        t = 30.0
     flat = V + 0.5 * t * principal_curvatures(V, F).normals
     assert folded_triangles(V, flat, F).any()  # the full offset folds
     ms = mid_surface(V, F, t)
@@ -153,7 +182,7 @@ def test_flip_check_alone_leaves_no_flipped_triangle(make, monkeypatch):
     assert signed_area_ratio(V, ms.V, F).min() > MIN_AREA_RATIO
     assert ms.clamped.any() and ms.offset.min() >= 0
     if make == "trough":
-        assert not ms.clamped[np.abs(V[:, 0]) > 12].any()  # away from the trough: the full t/2
+        assert not ms.clamped[np.abs(V[:, 0]) > 25].any()  # away from the trough: the full t/2
 
 
 # ---------------------------------------------------------------------------------- curvature
