@@ -154,3 +154,50 @@ def test_degenerate_patterns(name):
     s = m.seams[0]
     assert np.isfinite(s.mid_a).all() and np.isfinite(s.normal_a).all()
     np.testing.assert_array_equal(svd[s.chain_a], svd[s.chain_b])
+
+
+# ------------------------------------------------------------------ with the darts and splits of sheet_pieces
+def sheet_pattern(res):
+    """The pattern mesh of a `sheet_pieces` result as the pattern object stores it: every piece's
+    unfolding side by side, the piece of every triangle, the source vertex of every pattern vertex."""
+    UV, F, piece, sv, base, x = [], [], [], [], 0, 0.0
+    for j, u in enumerate(res.unfoldings):
+        P = u.UV - u.UV.min(axis=0) + [x, 0.0]
+        x = P[:, 0].max() + 20.0
+        UV.append(P)
+        F.append(u.F + base)
+        piece.append(np.full(len(u.F), j))
+        sv.append(u.vert_origin)
+        base += len(P)
+    return np.concatenate(UV), np.concatenate(F), np.concatenate(piece), np.concatenate(sv)
+
+
+def test_the_dart_of_sheet_pieces_on_a_cone_is_found_with_its_apex():
+    from test_core_sheet_pieces import cone
+
+    from bolus_addon.core.sheet_pieces import sheet_pieces
+
+    res = sheet_pieces(*cone(rings=15, na=40), 0.02)
+    assert len(res.darts) == 1 and not res.splits
+    UV, F, piece, sv = sheet_pattern(res)
+    m = pattern_marks(UV, F, piece, sv)
+    assert not m.seams and len(m.darts) == 1
+    d = m.darts[0]
+    assert sv[d.apex] == res.darts[0].path[-1]
+    np.testing.assert_array_equal(sv[d.leg_a], res.darts[0].path)
+    np.testing.assert_array_equal(sv[d.leg_b], res.darts[0].path)
+    assert d.leg_a[0] != d.leg_b[0]  # opened: the cut's two sides part at the outline
+
+
+def test_the_split_of_sheet_pieces_on_a_saddle_is_one_seam_on_both_pieces():
+    from test_core_sheet_pieces import saddle
+
+    from bolus_addon.core.sheet_pieces import sheet_pieces
+
+    res = sheet_pieces(*saddle(), 0.02)
+    assert len(res.splits) == 1 and len(res.unfoldings) == 2
+    UV, F, piece, sv = sheet_pattern(res)
+    m = pattern_marks(UV, F, piece, sv)
+    assert not m.darts and [(s.number, s.piece_a, s.piece_b) for s in m.seams] == [(1, 0, 1)]
+    s = m.seams[0]
+    assert sorted(sv[s.chain_a]) == sorted(res.splits[0].path) and list(sv[s.chain_a]) == list(sv[s.chain_b])
