@@ -919,15 +919,22 @@ def measure_pieces(V, F, sp) -> dict:
 
 def run_sheet_pieces(fn, V, F, repeat: int, max_el: float) -> dict:
     """Ours with refinement: `sheet_pieces(V, F, max_el)`, best wall time of `repeat`, measured piece by piece."""
-    times, sp = [], None
+    import numpy as np
+
+    times, runs = [], []
     for _ in range(repeat):
         gc.collect()
         t0 = time.perf_counter()
         sp = fn(V, F, max_el=max_el)
         times.append(time.perf_counter() - t0)
+        runs.append(sp)
+    sp = runs[-1]
+    same = all(np.array_equal(r.piece, sp.piece) and len(r.darts) == len(sp.darts) for r in runs)
     row = {"method": f"ours sheet_pieces(max_el={max_el:g})", "seconds": min(times), "runs_s": times,
            "pieces": len(sp.unfoldings), "darts": len(sp.darts), "splits": len(sp.splits), "met": bool(sp.met),
-           "reason": sp.reason, "own_seconds": float(getattr(sp, "seconds", float("nan")))}
+           "reason": sp.reason, "own_seconds": float(getattr(sp, "seconds", float("nan"))), "repeatable": same}
+    if not same:
+        print("   WARNING: sheet_pieces gave different pieces in the repeated runs (the last one is measured)")
     row.update(measure_pieces(V, F, sp))
     return row
 
@@ -1071,7 +1078,8 @@ def hard_table(rows: list[dict]) -> Table:
             ok = all(row.get(k) for k in ("met_EL", "met_EA", "met_valid"))
             ref = [str(r["pieces"]), str(r["darts"]), str(r["splits"]), f"{pct(r['worst_EL'])} / {pct(r['worst_EA'])}",
                    f"{pct(r['EL'])} / {pct(r['EA'])}", f"{r['flipped']}/{r['overlaps']}", sec(r),
-                   ("yes" if ok else "no") + ("" if r["partition"] else " (partition broken)")]
+                   ("yes" if ok else "no") + ("" if r["partition"] else " (partition broken)")
+                   + ("" if r.get("repeatable", True) else " (runs differ)")]
         else:
             ref = ["n/a"] * 7 + [r.get("error", "n/a")[:60]]
         t.add(name, f"{row['faces']:,}", el_ea(u), fo(u), sec(u), *ref, el_ea(s10), sec(s10), el_ea(s100),

@@ -132,7 +132,11 @@ def test_run_sheet_pieces_counts_and_times(ub, bumpy):
     row = ub.run_sheet_pieces(fake, V, F, repeat=3, max_el=0.02)
     assert calls == [0.02] * 3 and len(row["runs_s"]) == 3 and row["seconds"] == min(row["runs_s"])
     assert (row["pieces"], row["darts"], row["splits"], row["met"]) == (2, 2, 1, False)
-    assert row["reason"] == "piece 1 misses: piece limit" and row["partition"]
+    assert row["reason"] == "piece 1 misses: piece limit" and row["partition"] and row["repeatable"]
+    other = FakePieces(piece=1 - sp.piece, unfoldings=sp.unfoldings[::-1])
+    answers = iter([sp, other, sp])
+    row = ub.run_sheet_pieces(lambda V_, F_, max_el: next(answers), V, F, repeat=3, max_el=0.02)
+    assert not row["repeatable"]  # the runs gave different pieces: the table says so
 
 
 def hard_row(ub, name, worst_el, worst_ea, flipped=0, overlaps=0, s=1.0, s100=0.6, partition=True, met=True):
