@@ -1106,6 +1106,35 @@ def hard_target_line(rows: list[dict], max_el: float) -> str:
     return out + (f". Worst piece EL {pct(worst_el['methods']['refined']['worst_EL'])} % ({worst_el['patch']}).")
 
 
+def hard_case(name: str) -> str:
+    """The case a patch belongs to: its name without the trailing " p<k>" (the 3 patches of one nose)."""
+    head, _, tail = name.rpartition(" p")
+    return head if head and tail.isdigit() else name
+
+
+def hard_cases_table(rows: list[dict]) -> Table:
+    """Per case (all patches of one region together): seconds of ours without / with refinement and of SLIM-100,
+    the ratio with refinement / SLIM-100, and on how many patches every piece met the targets."""
+    cases: dict = {}
+    for row in rows:
+        if "methods" in row:
+            cases.setdefault(hard_case(row["patch"]), []).append(row)
+    t = Table([("case", "<"), ("patches", ">"), ("unrefined s", ">"), ("refined s", ">"), ("SLIM-100 s", ">"),
+               ("refined / SLIM-100", ">"), ("met", ">")])
+    for case, rs in cases.items():
+        def total(key):
+            vals = [r["methods"].get(key, {}).get("seconds") for r in rs]
+            return None if any(v is None for v in vals) else float(sum(vals))
+
+        u, r, s = total("unrefined"), total("refined"), total("SLIM-100")
+        judged = [x for x in rs if "met_EL" in x]
+        met = sum(all(x.get(k) for k in ("met_EL", "met_EA", "met_valid")) for x in judged)
+        t.add(case, len(rs), "n/a" if u is None else f"{u:.2f}", "n/a" if r is None else f"{r:.2f}",
+              "n/a" if s is None else f"{s:.2f}", f"{ratio(r, s):.2f}" if r is not None and s else "n/a",
+              f"{met} of {len(judged)}" if judged else "n/a")
+    return t
+
+
 def hard_reasons(rows: list[dict]) -> list[str]:
     """sheet_pieces' own account of every patch it did not meet the target on."""
     out = []
@@ -1133,7 +1162,9 @@ def hard_legend(args) -> str:
 
 def hard_markdown(rows: list[dict], args, argv, total_s: float | None = None) -> str:
     out = [HARD_HEADING, "", benchutil.run_line("unfold_bench.py", argv), "", hard_legend(args) + ".", "",
-           hard_table(rows).markdown(), "", hard_target_line(rows, args.max_el)]
+           hard_table(rows).markdown(), "", hard_target_line(rows, args.max_el), "",
+           "Per case (the patches of one region together, times summed; met: patches whose every piece met the "
+           "targets):", "", hard_cases_table(rows).markdown()]
     reasons = hard_reasons(rows)
     if reasons:
         out += ["", "Where the target was not met, `sheet_pieces` says:", ""] + [f"- {r}" for r in reasons]
@@ -1205,6 +1236,8 @@ def print_hard(rows: list[dict], args) -> None:
     print(f"\nHard patches: darts and splits. {hard_legend(args)}.")
     print(hard_table(rows).text())
     print(hard_target_line(rows, args.max_el))
+    print("\nPer case (the patches of one region together, times summed):")
+    print(hard_cases_table(rows).text())
     for r in hard_reasons(rows):
         print("  not met: " + r)
 

@@ -260,3 +260,19 @@ def test_nose_patches_are_the_nose_cut_in_three(hp):
     for p in ps:
         check_mesh(p["V"], p["F"], manifold=True)
         assert 10.0 < np.ptp(p["V"], axis=0).max() < 2 * hp.NOSE_RADIUS_MM
+
+
+def test_cases_sum_the_patches_of_one_region(ub):
+    """A case is a region's patches together ("ict nose p0".."p2" -> "ict nose"): times summed, the ratio of the
+    sums, and how many of its patches met every target."""
+    assert ub.hard_case("ict nose p12") == "ict nose" and ub.hard_case("finger tip") == "finger tip"
+    assert ub.hard_case("pocket p") == "pocket p"
+    rows = [hard_row(ub, "nose p0", 0.019, 0.029, s=1.0, s100=0.5), hard_row(ub, "nose p1", 0.05, 0.01, s=2.0,
+                                                                              s100=1.0),
+            hard_row(ub, "finger tip", 0.01, 0.01, s=0.3, s100=0.3), {"patch": "gone", "error": "x"}]
+    t = ub.hard_cases_table(rows)
+    assert [r[0] for r in t.rows] == ["nose", "finger tip"]
+    nose = t.rows[0]
+    assert nose[1] == "2" and nose[2] == "1.00" and nose[3] == "3.00" and nose[4] == "1.50"
+    assert nose[5] == "2.00" and nose[6] == "1 of 2"
+    assert t.rows[1][5] == "1.00" and t.rows[1][6] == "1 of 1"
