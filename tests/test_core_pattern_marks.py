@@ -201,3 +201,31 @@ def test_the_split_of_sheet_pieces_on_a_saddle_is_one_seam_on_both_pieces():
     assert not m.darts and [(s.number, s.piece_a, s.piece_b) for s in m.seams] == [(1, 0, 1)]
     s = m.seams[0]
     assert sorted(sv[s.chain_a]) == sorted(res.splits[0].path) and list(sv[s.chain_a]) == list(sv[s.chain_b])
+
+
+def test_seam_tick_keeps_off_corners_and_sits_at_the_same_source_place_on_both_sides():
+    """A seam along two sides of a piece (an L-shaped cut) turns 90 degrees at its middle: the
+    tick goes beside the corner, not on it, at the same source position on both pieces."""
+    V, F = grid(4, 4, 40.0)
+    c = V[F].mean(axis=1)
+    piece = ((c[:, 0] > 20) & (c[:, 1] > 20)).astype(int)  # one quarter cut out along an L
+    V2 = V[:, :2].copy()
+    V2[:, 0] *= 1.0 + 0.01 * V2[:, 1] / 40  # a little shear: the two sides differ in shape, not in topology
+    UV, Fp, piece, sv = explode(V2, F, piece)
+    UV[np.unique(Fp[piece == 1])] *= 1.02  # piece 1 is 2 % larger
+    m = pattern_marks(UV, Fp, piece, sv)
+    assert len(m.seams) == 1
+    s = m.seams[0]
+    corner_a = UV[s.chain_a][np.argmin(np.abs(np.linalg.norm(V2[sv[s.chain_a]] - [20, 20], axis=1)))]
+    assert np.linalg.norm(s.mid_a - corner_a) >= 5.0 - 1e-9  # a quarter of the 20 mm chain away, or 8 mm
+    # the same place along the source chain on both sides: the same edge, the same share of it
+    share = []
+    for mid, chain in ((s.mid_a, s.chain_a), (s.mid_b, s.chain_b)):
+        P = UV[chain]
+        seg = P[1:] - P[:-1]
+        t = np.einsum("ij,ij->i", mid - P[:-1], seg) / np.einsum("ij,ij->i", seg, seg)
+        off = np.linalg.norm(P[:-1] + np.clip(t, 0, 1)[:, None] * seg - mid, axis=1)
+        i = int(np.argmin(off))
+        assert off[i] < 1e-9
+        share.append((i, round(float(t[i]), 9)))
+    assert share[0] == share[1]

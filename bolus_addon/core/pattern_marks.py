@@ -12,8 +12,9 @@ source pair {sv[a], sv[b]} is an outline edge a second time.
   (the apex: the dart opened into a V, seed 4.1.2 / issue 12 point 1), else a **join**
   (a cut that made a tube or a ring into a disk), numbered like the seams.
 
-Every mark also keeps where to draw it (`PatternMarks.UV`, the chain's arc-length middle
-and its inward normal on each side), so the drawing needs no mesh.
+Every mark also keeps where to draw it (`PatternMarks.UV`; for a seam the tick's place on
+each side -- the same source position near the chain's middle, away from sharp corners --
+and the inward normal there), so the drawing needs no mesh.
 """
 from __future__ import annotations
 
@@ -26,13 +27,19 @@ from .overlap import as_pattern_arrays
 
 __all__ = ["Seam", "DartMark", "PatternMarks", "pattern_marks"]
 
+#: a chain turning more than this (rad) at a vertex has a corner there; ticks keep away from it
+CORNER_TURN = np.radians(30.0)
+#: how far (mm along the chain) a tick keeps from a corner, at most a quarter of the chain
+CORNER_CLEARANCE_MM = 8.0
+
 
 @dataclass
 class Seam:
     """A numbered seam (piece_a != piece_b) or join (piece_a == piece_b).
 
     chain_a, chain_b : (k,) pattern vertex ids, the same source vertices in the same order
-    mid_a, mid_b : (2,) mm, the arc-length middle of each side's chain
+    mid_a, mid_b : (2,) mm, where the tick goes on each side: the same source position, near
+        the chain's arc-length middle but away from its sharp corners (`_mark_place`)
     normal_a, normal_b : (2,) unit normals there, pointing into the piece
     """
 
@@ -114,21 +121,42 @@ def _paths(edges: list[tuple[int, int]]) -> list[list[int]]:
     return out
 
 
-def _mid_and_normal(UV, chain, third):
-    """Arc-length middle (2,) of the polyline UV[chain] and the unit normal (2,) there pointing
-    to the side of ``third[i]`` (the opposite corner of the triangle on chain edge i)."""
-    P = UV[chain]
-    seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
+def _turns(P: np.ndarray) -> np.ndarray:
+    """(k,) turning angle (rad) of the polyline P (k,2) at each vertex (0 at both ends)."""
+    d = np.diff(P, axis=0)
+    ang = np.arctan2(d[:, 1], d[:, 0])
+    t = np.abs((np.diff(ang) + np.pi) % (2 * np.pi) - np.pi)
+    return np.r_[0.0, t, 0.0]
+
+
+def _mark_place(UV, ca, cb, third_a, third_b):
+    """Where the seam's tick goes on both sides, at the same source position: edge i of the chain
+    and the share t along it, near the chain's arc-length middle but at least `CORNER_CLEARANCE_MM`
+    (at most a quarter of the chain) from a sharp corner (a turn above `CORNER_TURN` on either side).
+    Returns (mid_a, normal_a, mid_b, normal_b), normals (unit) pointing into each side's piece."""
+    Pa, Pb = UV[ca], UV[cb]
+    seg = np.linalg.norm(np.diff(Pa, axis=0), axis=1)
     s = np.concatenate([[0.0], np.cumsum(seg)])
     half = s[-1] / 2
-    i = int(min(np.searchsorted(s, half, side="right") - 1, len(seg) - 1))
-    t = (half - s[i]) / seg[i] if seg[i] > 0 else 0.0
-    mid = P[i] + t * (P[i + 1] - P[i])
-    d = P[i + 1] - P[i]
-    n = np.array([-d[1], d[0]]) / max(float(np.linalg.norm(d)), 1e-300)
-    if np.dot(UV[third[i]] - P[i], n) < 0:
-        n = -n
-    return mid, n
+    corners = s[(_turns(Pa) > CORNER_TURN) | (_turns(Pb) > CORNER_TURN)]
+    clear = min(CORNER_CLEARANCE_MM, s[-1] / 4)
+    cand = np.r_[half, (s[:-1] + s[1:]) / 2, s[1:-1]]  # the middle, edge midpoints, inner vertices
+    if len(corners):
+        ok = np.abs(cand[:, None] - corners[None]).min(axis=1) >= clear
+        if ok.any():
+            cand = cand[ok]
+    pos = cand[np.argmin(np.abs(cand - half))]
+    i = int(min(np.searchsorted(s, pos, side="right") - 1, len(seg) - 1))
+    t = (pos - s[i]) / seg[i] if seg[i] > 0 else 0.0
+    out = []
+    for P, third in ((Pa, third_a), (Pb, third_b)):
+        mid = P[i] + t * (P[i + 1] - P[i])
+        d = P[i + 1] - P[i]
+        n = np.array([-d[1], d[0]]) / max(float(np.linalg.norm(d)), 1e-300)
+        if np.dot(UV[third[i]] - P[i], n) < 0:
+            n = -n
+        out += [mid, n]
+    return tuple(out)
 
 
 def pattern_marks(UV, F, piece, source_vertex) -> PatternMarks:
@@ -214,8 +242,7 @@ def pattern_marks(UV, F, piece, source_vertex) -> PatternMarks:
                     continue
                 if pa == pb and ca[0] == cb[0]:  # a slit closed at both ends: nothing to match apart
                     continue
-                mid_a, n_a = _mid_and_normal(UV, ca, thirds[0])
-                mid_b, n_b = _mid_and_normal(UV, cb, thirds[1])
+                mid_a, n_a, mid_b, n_b = _mark_place(UV, ca, cb, thirds[0], thirds[1])
                 seams_raw.append(((pa, pb, int(sv[np.concatenate([ca])].min())),
                                   dict(piece_a=pa, piece_b=pb, chain_a=ca, chain_b=cb, mid_a=mid_a, mid_b=mid_b,
                                        normal_a=n_a, normal_b=n_b)))
