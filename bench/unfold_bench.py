@@ -1176,28 +1176,45 @@ def hard_markdown(rows: list[dict], args, argv, total_s: float | None = None) ->
     return "\n".join(out)
 
 
-def replace_markdown_section(path, heading: str, text: str) -> None:
+def _section_span(lines: list[str], start: int) -> int:
+    """The line after the section starting at lines[start] (its heading): the next heading of the same or a
+    higher level, or the end."""
+    level = len(lines[start]) - len(lines[start].lstrip("#"))
+    end = start + 1
+    while end < len(lines):
+        s = lines[end]
+        k = len(s) - len(s.lstrip("#"))
+        if 0 < k <= level and s[k:k + 1] == " ":
+            break
+        end += 1
+    return end
+
+
+def replace_markdown_section(path, heading: str, text: str, after: str | None = "## Unfolding") -> None:
     """Put `text` (starting with `heading`) into the markdown file in place of the section under the same
-    heading (up to the next heading of the same or a higher level), or append it when there is none."""
+    heading (up to the next heading of the same or a higher level); when there is none, insert it after the
+    section whose heading starts with `after` (the unfolding's), or append it."""
     from pathlib import Path
 
     p = Path(path)
     old = p.read_text(encoding="utf-8") if p.exists() else ""
     lines = old.splitlines()
-    level = len(heading) - len(heading.lstrip("#"))
     start = next((i for i, ln in enumerate(lines) if ln.strip() == heading.strip()), None)
-    if start is None:
-        benchutil.append_markdown(path, text)
-        return
-    end = start + 1
-    while end < len(lines):
-        s = lines[end]
-        if s.startswith("#") and len(s) - len(s.lstrip("#")) <= level and s[len(s) - len(s.lstrip("#")):][:1] == " ":
-            break
-        end += 1
+    if start is not None:
+        end = _section_span(lines, start)
+    else:
+        prev = next((i for i, ln in enumerate(lines) if after and ln.startswith(after)), None)
+        if prev is None:
+            benchutil.append_markdown(path, text)
+            return
+        start = end = _section_span(lines, prev)
+        while start > 0 and not lines[start - 1].strip():  # one blank line before the new section
+            start -= 1
+        lines[start:end] = [""]
+        start = end = start + 1
     new = lines[:start] + text.strip("\n").splitlines() + ([""] if end < len(lines) else []) + lines[end:]
     p.write_text("\n".join(new) + "\n", encoding="utf-8")
-    print(f"section '{heading}' replaced in {p}")
+    print(f"section '{heading}' written into {p}")
 
 
 def hard_patch_list(args) -> list[dict]:

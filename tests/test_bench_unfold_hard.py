@@ -276,3 +276,14 @@ def test_cases_sum_the_patches_of_one_region(ub):
     assert nose[1] == "2" and nose[2] == "1.00" and nose[3] == "3.00" and nose[4] == "1.50"
     assert nose[5] == "2.00" and nose[6] == "1 of 2"
     assert t.rows[1][5] == "1.00" and t.rows[1][6] == "1 of 1"
+
+
+def test_a_new_section_goes_after_the_unfolding(ub, tmp_path):
+    doc = tmp_path / "benchmarks.md"
+    doc.write_text("# B\n\n## Unfolding (`bench/unfold_bench.py`)\n\nu\n\n### Ablation\n\na\n\n## Shell\n\ns\n")
+    ub.replace_markdown_section(doc, ub.HARD_HEADING, ub.HARD_HEADING + "\n\nhard\n")
+    text = doc.read_text()
+    assert text.index("### Ablation") < text.index(ub.HARD_HEADING) < text.index("## Shell")
+    assert "\n\na\n\n" + ub.HARD_HEADING + "\n\nhard\n\n## Shell\n\ns\n" in text
+    ub.replace_markdown_section(doc, ub.HARD_HEADING, ub.HARD_HEADING + "\n\nagain\n")
+    assert doc.read_text() == text.replace("hard\n", "again\n")
