@@ -98,7 +98,7 @@ def show_selection(obj: bpy.types.Object, sel: np.ndarray) -> None:
 
 
 def svg_polylines(root: ET.Element) -> list[tuple[np.ndarray, float, list[float]]]:
-    """Every <path> (M/L/Z only, as core.pattern_svg writes them) and <line> of the SVG as
+    """Every <path> (M/L/Z only, as core.pattern_svg writes them), <line>, <polyline> and <polygon> of the SVG as
     (points (k, 2) in SVG user units (mm), stroke width, dash pattern or [])."""
     out = []
     for el in root.iter():
@@ -108,6 +108,9 @@ def svg_polylines(root: ET.Element) -> list[tuple[np.ndarray, float, list[float]
         if tag == "line":
             pts = np.array([[float(el.get("x1")), float(el.get("y1"))], [float(el.get("x2")), float(el.get("y2"))]])
             out.append((pts, width, dash))
+        elif tag in ("polyline", "polygon"):  # marks and the test square (core.pattern_svg)
+            pts = np.array(el.get("points").replace(",", " ").split(), dtype=float).reshape(-1, 2)
+            out.append((np.r_[pts, pts[:1]] if tag == "polygon" else pts, width, dash))
         elif tag == "path":
             tokens = el.get("d").replace(",", " ").split()
             pts, i = [], 0
