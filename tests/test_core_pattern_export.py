@@ -291,3 +291,35 @@ def test_degenerate_pieces(tmp_path, name, ext):
     assert np.isfinite(loop).all()
     assert signed_area(loop) == pytest.approx(1600.0, rel=1e-5)  # the 40 x 40 mm piece (+ the needle sliver)
     assert perimeter(loop) == pytest.approx(160.0, rel=1e-5)
+
+
+def test_marks_of_another_pattern_and_bad_text_are_handled(tmp_path):
+    pieces, marks = marked_pattern()
+    other = pdraw_marks(marks, UV=marks.UV[:10])
+    with pytest.raises(BolusError, match="belong to another pattern"):
+        write_pattern(tmp_path / "a.svg", pieces, other)
+    with pytest.raises(BolusError, match="carry no positions"):
+        write_pattern(tmp_path / "a.svg", pieces, pdraw_marks(marks, UV=None))
+    assert not os.listdir(tmp_path)
+    # a label with a newline and a tab is written on one line in every format
+    for ext in ("svg", "dxf", "pdf"):
+        write_pattern(tmp_path / f"b.{ext}", pieces[:1], label="ID 1\nline\t2")
+    texts = [t.text for t in ET.fromstring((tmp_path / "b.svg").read_text()).iter("{http://www.w3.org/2000/svg}text")]
+    assert "ID 1 line 2" in texts
+    assert "ID 1 line 2" in [t.dxf.text for t in dxf_doc(tmp_path / "b.dxf").modelspace().query("TEXT")]
+
+
+def pdraw_marks(marks, **changes):
+    from dataclasses import replace
+
+    return replace(marks, **changes)
+
+
+def test_pdf_page_too_large_for_one_page_is_refused_and_tiled_instead(tmp_path):
+    V, F = grid(60, 1, 6000.0)
+    pieces = [{"UV": V[:, :2] * [1.0, 0.005], "F": F}]  # 6 m x 30 mm
+    with pytest.raises(BolusError, match="too large for one PDF page.*A4 or Letter"):
+        write_pattern(tmp_path / "long.pdf", pieces, page="NONE")
+    assert not os.listdir(tmp_path)
+    info = write_pattern(tmp_path / "long.pdf", pieces, page="A4")
+    assert info["pages"] == len(pdfium.PdfDocument(str(tmp_path / "long.pdf"))) > 20

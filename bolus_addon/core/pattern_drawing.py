@@ -377,6 +377,27 @@ def _dart_marks(P: "Drawing", UV, dart):
                       "middle", False, MARKS)
 
 
+def _one_line(text) -> str:
+    """The text on one line: control characters (newlines, tabs) become spaces, ends stripped."""
+    return "".join(" " if ord(ch) < 32 or ord(ch) == 127 else ch for ch in str(text or "")).strip()
+
+
+def _marks_uv(marks) -> np.ndarray:
+    """(n,2) finite positions the marks index; BolusError when missing or too short for their ids."""
+    if marks.UV is None:
+        raise BolusError("the pattern marks carry no positions (PatternMarks.UV): make them with pattern_marks")
+    UVm = np.asarray(marks.UV, dtype=np.float64)
+    ids = [np.asarray(c) for s in marks.seams for c in (s.chain_a, s.chain_b)]
+    ids += [np.asarray(c) for dm in marks.darts for c in (dm.leg_a, dm.leg_b)]
+    top = max(int(c.max()) for c in ids)
+    if UVm.ndim != 2 or UVm.shape[1] != 2 or top >= len(UVm) or min(int(c.min()) for c in ids) < 0:
+        raise BolusError(f"the pattern marks index vertex {top} of {len(UVm)} positions: they belong to "
+                         "another pattern")
+    if not np.isfinite(UVm).all():
+        raise BolusError("the pattern marks' positions are not finite (NaN or infinite)")
+    return UVm
+
+
 def pattern_drawing(pieces, marks=None, *, label: str = "", title: str = "", seam_allowance_mm: float = 0.0,
                     margin_mm: float = 10.0, decimals: int = 3) -> Drawing:
     """Lay the pattern out once, in paper mm.
@@ -401,11 +422,11 @@ def pattern_drawing(pieces, marks=None, *, label: str = "", title: str = "", sea
         raise BolusError("there is no pattern piece to export")
     d = _length(seam_allowance_mm, "seam allowance")
     m = _length(margin_mm, "margin")
-    label, title = str(label or "").strip(), str(title or "")
+    label, title = _one_line(label), _one_line(title)
     raw = [_piece(i, isl, d, label) for i, isl in enumerate(pieces)]
     allpts = np.concatenate([np.concatenate(r[2] + r[3]) for r in raw])
-    if marks is not None and marks.UV is not None and (marks.seams or marks.darts):
-        UVm = np.asarray(marks.UV, dtype=np.float64)
+    if marks is not None and (marks.seams or marks.darts):
+        UVm = _marks_uv(marks)
         ids = [s.chain_a for s in marks.seams] + [s.chain_b for s in marks.seams]
         ids += [np.r_[dm.leg_a, dm.leg_b] for dm in marks.darts]
         allpts = np.concatenate([allpts, UVm[np.concatenate(ids)]])
@@ -441,8 +462,7 @@ def pattern_drawing(pieces, marks=None, *, label: str = "", title: str = "", sea
                         _label_block(P, UV, F, loops, lines, keep_out.get(pid, [])), pattern_cut=loops)
         P.pieces.append(dp)
         by_id.setdefault(pid, dp)
-    if marks is not None:
-        UVm = np.asarray(marks.UV, dtype=np.float64)
+    if marks is not None and (marks.seams or marks.darts):
         for s in marks.seams:
             for pid, mid, nrm in ((s.piece_a, s.mid_a, s.normal_a), (s.piece_b, s.mid_b, s.normal_b)):
                 tick, num = _seam_marks(P, mid, nrm, s.number)

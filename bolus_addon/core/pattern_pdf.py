@@ -25,7 +25,7 @@ import numpy as np
 from .errors import BolusError
 from .pattern_drawing import PAGES, TEST_SQUARE_MM, Drawing, Stroke, Text, test_square_strokes
 
-__all__ = ["drawing_pdf", "tile_grid", "TILE_OVERLAP_MM", "PAGE_MARGIN_MM", "FOOTER_MM"]
+__all__ = ["drawing_pdf", "tile_grid", "TILE_OVERLAP_MM", "PAGE_MARGIN_MM", "FOOTER_MM", "MAX_PAGE_MM"]
 
 #: neighbouring tiles show this much of the drawing twice
 TILE_OVERLAP_MM = 10.0
@@ -36,6 +36,8 @@ FOOTER_MM = 60.0
 #: registration cross arm length and corner mark length (mm)
 CROSS_MM, CORNER_MM = 4.0, 6.0
 PT_PER_MM = 72.0 / 25.4
+#: the largest page side a PDF may have (14400 pt, ISO 32000)
+MAX_PAGE_MM = 14400 / PT_PER_MM
 TILE_NOTE = "print at 100 %, no scaling; the square must measure 50 mm"
 
 
@@ -127,6 +129,9 @@ def drawing_pdf(drawing: Drawing, page: str = "NONE") -> tuple[bytes, list]:
     W, H = drawing.width, drawing.height
     items = _items(drawing)
     if page == "NONE":
+        if max(W, H) > MAX_PAGE_MM:
+            raise BolusError(f"the pattern ({W:.0f} x {H:.0f} mm) is too large for one PDF page (at most "
+                             f"{MAX_PAGE_MM:.0f} mm a side): choose A4 or Letter to tile it, or export a DXF")
         pdf = FPDF(unit="mm", format=(W, H))
         _setup(pdf, drawing)
         pdf.add_page()
