@@ -60,6 +60,14 @@ class Springs:
         """Sparse (s,n) matrix B with B @ Q = Q[p] - Q[q] (cached per n)."""
         return self._incidence_pair(n)[0]
 
+    def _end_columns(self) -> tuple[np.ndarray, np.ndarray]:
+        """(p (s,), q (s,)): the spring ends as contiguous arrays (cached; fast np.take gathers)."""
+        cols = self.__dict__.get("_cols")
+        if cols is None or cols[0] is not self.ends:
+            cols = (self.ends, np.ascontiguousarray(self.ends[:, 0]), np.ascontiguousarray(self.ends[:, 1]))
+            self.__dict__["_cols"] = cols
+        return cols[1], cols[2]
+
     def _incidence_pair(self, n: int):
         """(B, B^T) as CSR matrices, cached per n (B^T @ g scatters spring forces to vertices)."""
         cache = self.__dict__.setdefault("_incidence", {})
@@ -177,8 +185,11 @@ def sub_springs(springs: Springs, keep_vertex: np.ndarray) -> tuple[Springs, np.
 def spring_energy(x: np.ndarray, springs: Springs, n: int) -> tuple[float, np.ndarray]:
     """Total energy (eqs. 3-28, 3-29, plus eq. 4-25) and its gradient (2n,) at x = UV.ravel() (2n,)."""
     Q = x.reshape(n, 2)
-    B, BT = springs._incidence_pair(n)
-    d = B @ Q  # Q[p] - Q[q] for every spring, as one sparse product
+    _, BT = springs._incidence_pair(n)
+    # Q[p] - Q[q] for every spring (np.take: row gathers ~8x faster than Q[idx]; the same
+    # numbers as the sparse product B @ Q, which they replace)
+    p, q = springs._end_columns()
+    d = Q.take(p, axis=0) - Q.take(q, axis=0)
     ell = np.sqrt(np.einsum("ij,ij->i", d, d))
     ell_safe = np.maximum(ell, 1e-300)
     stretch = ell - springs.rest
@@ -197,7 +208,10 @@ def spring_energy(x: np.ndarray, springs: Springs, n: int) -> tuple[float, np.nd
 
 def _area_gradient(Q: np.ndarray, F: np.ndarray, coef: np.ndarray, n: int, abc=None) -> np.ndarray:
     """sum_t coef_t dA_t/dQ (2n,) for signed areas A_t of triangles F (m,3)."""
-    a, b, c = (Q[F[:, 0]], Q[F[:, 1]], Q[F[:, 2]]) if abc is None else abc
+    if abc is None:
+        P = Q.take(F, axis=0)
+        abc = P[:, 0], P[:, 1], P[:, 2]
+    a, b, c = abc
     # dA/dv for the corner v of a counter-clockwise triangle (v, p, q) = 0.5 (p_y - q_y, q_x - p_x)
     h = 0.5 * coef
     corners = F.T.ravel()
@@ -219,7 +233,8 @@ def area_terms(x: np.ndarray, F: np.ndarray, A0: np.ndarray, n: int, flip_weight
     1/2 sum a_t (A_t - A0_t)^2 with area_weights a (m,).  x = UV.ravel() (2n,), A0 (m,).
     """
     Q = x.reshape(n, 2)
-    a, b, c = Q[F[:, 0]], Q[F[:, 1]], Q[F[:, 2]]
+    P = Q.take(F, axis=0)  # (m,3,2); np.take: row gathers ~8x faster than Q[F]
+    a, b, c = P[:, 0], P[:, 1], P[:, 2]
     A = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
     e = 0.0
     coef = np.zeros(len(F))
