@@ -1,6 +1,6 @@
 """Cutter-ready pattern export (issue 12 point 4): one drawing, written as SVG, DXF and PDF."""
-import io
 import os
+import shutil
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -15,7 +15,7 @@ from bolus_addon.core import pattern_drawing as pdraw
 from bolus_addon.core.errors import BolusError
 from bolus_addon.core.pattern_drawing import TEST_SQUARE_MM, pattern_drawing, write_pattern
 from bolus_addon.core.pattern_marks import pattern_marks
-from bolus_addon.core.pattern_pdf import FOOTER_MM, PAGE_MARGIN_MM, TILE_OVERLAP_MM, drawing_pdf
+from bolus_addon.core.pattern_pdf import FOOTER_MM, PAGE_MARGIN_MM, TILE_OVERLAP_MM
 from bolus_addon.core.pattern_svg import signed_area, svg_outline_paths
 
 ezdxf = pytest.importorskip("ezdxf")
@@ -62,6 +62,19 @@ def render(path):
     return out
 
 
+def render_pdftoppm(path, tmp_path):
+    """Every page rendered by poppler's pdftoppm (when installed) as dark-pixel arrays at DPI."""
+    subprocess.run(["pdftoppm", "-gray", "-r", str(int(DPI)), str(path), str(tmp_path / "pg")], check=True)
+    out = []
+    for f in sorted(tmp_path.glob("pg*.pgm")):
+        data = f.read_bytes()
+        magic, w, h, maxval, rest = data.split(maxsplit=4)
+        assert magic == b"P5" and int(maxval) == 255
+        img = np.frombuffer(rest[: int(w) * int(h)], dtype=np.uint8).reshape(int(h), int(w))
+        out.append(img < 128)
+    return out
+
+
 def measure_square(dark, x0_mm, y0_mm, size_mm=70.0):
     """Side lengths (mm, centre to centre of the strokes) of the square in the window (x0, y0, size)."""
     a, b = int(x0_mm * PX_MM), int(y0_mm * PX_MM)
@@ -84,7 +97,9 @@ def test_dxf_is_in_mm_with_one_closed_polyline_per_outline_and_svg_perimeters(tm
     info = write_pattern(tmp_path / "p.dxf", islands, label=LABEL, seam_allowance_mm=3.0, title="face")
     assert info["format"] == "dxf" and info["pieces"] == 4
     doc = dxf_doc(tmp_path / "p.dxf")
-    assert doc.header["$INSUNITS"] == 4 and doc.header["$MEASUREMENT"] == 1
+    assert doc.header["$INSUNITS"] == 4 and doc.header["$MEASUREMENT"] == 1 and doc.units == 4
+    auditor = doc.audit()
+    assert not auditor.has_errors, [str(e) for e in auditor.errors]
     assert {"CUT", "SEAM_ALLOWANCE", "MARKS", "LABELS"} <= {layer.dxf.name for layer in doc.layers}
     msp = doc.modelspace()
     cut = msp.query('LWPOLYLINE[layer=="CUT"]')
@@ -180,6 +195,11 @@ def test_tiled_pdf_covers_the_pattern_with_a_square_on_every_page(tmp_path, pape
         w, h = measure_square(dark, PAGE_MARGIN_MM - 5, ph - PAGE_MARGIN_MM - FOOTER_MM + 1)
         assert w == pytest.approx(50.0, abs=0.5) and h == pytest.approx(50.0, abs=0.5)
         assert f"row {r + 1} col {c + 1}" in text and "print at 100 %, no scaling" in text
+    if shutil.which("pdftoppm"):  # the renderer the issue names, where installed
+        for dark, (_, _, _), (_, _, _, _, _, ch) in zip(render_pdftoppm(tmp_path / "t.pdf", tmp_path), pages,
+                                                        info["tiles"]):
+            w, h = measure_square(dark, PAGE_MARGIN_MM - 5, PAGE_MARGIN_MM + ch + 1)
+            assert w == pytest.approx(50.0, abs=0.5) and h == pytest.approx(50.0, abs=0.5)
     # neighbouring tiles overlap by TILE_OVERLAP_MM; every outline point is on some page
     tiles = np.array([t[2:] for t in info["tiles"]])
     xs, ys = np.unique(tiles[:, 0]), np.unique(tiles[:, 1])
