@@ -252,6 +252,22 @@ def test_piece_bending_flat_piece_is_infinite_radius():
     V, F = grid(6, 6, 50.0)
     (pb,) = piece_bending(V, F, np.zeros(len(F), dtype=int), 8.0, [0.0], 0.02)
     assert pb.R_min_mm == np.inf and pb.strain == 0.0 and pb.advice == "sheet"
+    import json
+
+    assert json.loads(json.dumps(pb.as_dict(), allow_nan=False))["R_min_mm"] is None
+
+
+def test_curvatures_shared():
+    """mid_surface and piece_bending take curvatures computed once; the results are the same."""
+    V, F = spherical_cap(40.0, 60, 3)
+    curv = principal_curvatures(V, F)
+    a, b = mid_surface(V, F, 6.0), mid_surface(V, F, 6.0, curvatures=curv)
+    np.testing.assert_array_equal(a.V, b.V)
+    piece = np.zeros(len(F), dtype=int)
+    assert piece_bending(V, F, piece, 6.0, [0.0], 0.02) == piece_bending(V, F, piece, 6.0, [0.0], 0.02,
+                                                                           curvatures=curv)
+    with pytest.raises(BolusError, match="not those of this region"):
+        mid_surface(V[:-1], F[(F < len(V) - 1).all(axis=1)], 6.0, curvatures=curv)
 
 
 def test_piece_bending_refuses_bad_input():

@@ -134,7 +134,9 @@ class PieceBending:
     reason: str
 
     def as_dict(self) -> dict:
-        return {"R_min_mm": self.R_min_mm, "strain": self.strain, "advice": self.advice, "reason": self.reason}
+        """JSON-safe: R_min_mm None for a flat piece (infinite radius)."""
+        R = self.R_min_mm if np.isfinite(self.R_min_mm) else None
+        return {"R_min_mm": R, "strain": self.strain, "advice": self.advice, "reason": self.reason}
 
 
 @dataclass
@@ -240,18 +242,31 @@ def principal_curvatures(V, F, sigma_mm: float = DEFAULT_SMOOTHING_MM,
     return PrincipalCurvatures(k1, k2, N)
 
 
-def mid_surface(V, F, thickness_mm, *, sigma_mm: float = DEFAULT_SMOOTHING_MM) -> MidSurface:
+def _curvatures(topo: MeshTopology, sigma_mm, given: PrincipalCurvatures | None) -> PrincipalCurvatures:
+    """`principal_curvatures` of topo, or the ``given`` ones after a shape check."""
+    if given is None:
+        return principal_curvatures(topo.V, topo.F, sigma_mm, topo=topo)
+    ok = all(np.shape(a) == (topo.n,) for a in (given.k1, given.k2)) and np.shape(given.normals) == (topo.n, 3)
+    if not ok:
+        raise BolusError(f"the curvatures given are not those of this region ({topo.n} vertices)")
+    return given
+
+
+def mid_surface(V, F, thickness_mm, *, sigma_mm: float = DEFAULT_SMOOTHING_MM,
+                curvatures: PrincipalCurvatures | None = None) -> MidSurface:
     """The skin V (n,3) mm, F (m,3) moved out by thickness_mm / 2 along its normals (module doc).
 
     thickness 0: V unchanged (a copy), offset 0.  The offset is clamped where the surface is
     concave towards the offset side with radius under t / (2 `CLAMP_FRACTION`), then
     wherever an offset triangle would flip or keep less than `MIN_AREA_RATIO` of its area.
-    sigma_mm: the scale of normals and curvature (keyword; 0 = raw normals).
+    sigma_mm: the scale of normals and curvature (keyword; 0 = the smallest window);
+    curvatures: `principal_curvatures` of (V, F) already computed (keyword; then sigma_mm
+    is not used), e.g. shared with `piece_bending`.
     `BolusError` on a negative / NaN / infinite thickness and on degenerate meshes.
     """
     t = _check_thickness(thickness_mm)
     topo = MeshTopology(*check_mesh(V, F, "the region"))
-    curv = principal_curvatures(topo.V, topo.F, sigma_mm, topo=topo)
+    curv = _curvatures(topo, sigma_mm, curvatures)
     V, F, N = topo.V, topo.F, curv.normals
     used = topo.used_vertices
     if t == 0:
@@ -328,13 +343,14 @@ def _weighted_quantile(x: np.ndarray, w: np.ndarray, q: float) -> float:
     return float(x[order][min(k, len(x) - 1)])
 
 
-def piece_bending(V, F, piece, thickness_mm, EL, max_el, sigma_mm: float = DEFAULT_SMOOTHING_MM) -> list[PieceBending]:
+def piece_bending(V, F, piece, thickness_mm, EL, max_el, sigma_mm: float = DEFAULT_SMOOTHING_MM, *,
+                  curvatures: PrincipalCurvatures | None = None) -> list[PieceBending]:
     """Bending strain and sheet-or-print advice of every piece (module doc).
 
     V (n,3) mm, F (m,3): the SKIN region (not the mid-surface); piece (m,) int: the piece
     of every triangle (-1: none); thickness_mm >= 0; EL: sequence, the EL of pieces 0..p-1
     (fractions); max_el: fraction (0: the EL test uses `piece_advice.DEFAULT_WARN_FRACTION`);
-    sigma_mm: scale of the curvature.  Returns p `PieceBending`: advice "sheet" iff
+    sigma_mm: scale of the curvature (curvatures: as in `mid_surface`).  Returns p `PieceBending`: advice "sheet" iff
     R_min >= `SHEET_RADIUS_FACTOR` t and EL <= max_el; thickness 0: strain 0, advice from
     EL only.  `BolusError` on bad arrays / numbers and a piece with no triangle.
     """
@@ -361,7 +377,7 @@ def piece_bending(V, F, piece, thickness_mm, EL, max_el, sigma_mm: float = DEFAU
     counts = np.bincount(piece[piece >= 0], minlength=p)
     if (counts == 0).any():
         raise BolusError(f"piece {int(np.argmin(counts))} has no triangles")
-    curv = principal_curvatures(topo.V, topo.F, sigma_mm, topo=topo)
+    curv = _curvatures(topo, sigma_mm, curvatures)
     kf = curv.kmax[topo.F].mean(axis=1)
     el_limit = max_el if max_el > 0 else DEFAULT_WARN_FRACTION
     out = []
