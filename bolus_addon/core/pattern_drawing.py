@@ -561,7 +561,8 @@ def write_pattern(path, pieces, marks=None, *, page: str = "NONE", label: str = 
     path, ext = _target(path)
     drawing = pattern_drawing(pieces, marks, label=label, title=title, seam_allowance_mm=seam_allowance_mm)
     info = {"path": path, "format": ext[1:], "pages": 1, "pieces": len(drawing.pieces),
-            "seams": len(marks.seams) if marks is not None else 0, "darts": len(marks.darts) if marks is not None else 0,
+            "seams": len(marks.seams) if marks is not None else 0,
+            "darts": len(marks.darts) if marks is not None else 0,
             "width_mm": drawing.width, "height_mm": drawing.height}
     if ext == ".svg":
         from .pattern_svg import drawing_svg
