@@ -312,6 +312,16 @@ def test_thickness_larger_than_the_region_refused():
     check_sheet_thickness(V, F, 15.0)
     with pytest.raises(BolusError, match=r"thickness 25 mm is larger than the region, which is about 2\d\.\d mm"):
         check_sheet_thickness(V, F, 25.0)
+    # a strip one triangle wide (every vertex on the border) is as wide as it is
+    Vs, Fs = grid(20, 1, 100.0)
+    Vs[:, 1] *= 0.1  # 100 x 10 mm, 5 mm cells: rungs 10 mm, diagonals 11.2 mm
+    assert 10.0 <= region_width(Vs, Fs) <= 11.2
+    check_sheet_thickness(Vs, Fs, 9.0)
+    with pytest.raises(BolusError, match="about 11.2 mm"):
+        check_sheet_thickness(Vs, Fs, 12.0)
+    # one triangle: its inscribed circle
+    tri = np.array([[0.0, 0, 0], [3, 0, 0], [0, 4, 0]])
+    np.testing.assert_allclose(region_width(tri, [[0, 1, 2]]), 2.0)  # 2 area / semi-perimeter = 1
     # a closed region: its smallest extent
     Vs, Fs = icosphere(2, 10.0)
     assert 19.0 < region_width(Vs, Fs) <= 20.0

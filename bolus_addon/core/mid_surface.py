@@ -49,11 +49,12 @@ over its corners).  The raw maximum of kmax is noise (one vertex decides), so R_
 that the most tightly curved 5 % of the piece's area reaches.  Strain = t / (2 R_min);
 advice "sheet" iff R_min >= 5 t and EL <= max_el, else "print" with the reason.
 
-Size (`check_sheet_thickness`): the region's width is twice the largest distance of any
-of its vertices from its boundary, measured along the mesh edges (the diameter of the
-largest inscribed circle, over-estimated by a few % by the edge path); a closed region
-uses the smallest extent of its vertices along their principal axes.  A thickness above
-the width is refused.
+Size (`check_sheet_thickness`): the region's width is twice the largest distance of a
+point from its boundary, measured along the mesh edges from its vertices (`region_width`:
+the diameter of the largest inscribed circle, over-estimated by the zigzag of the edge
+paths; a strip one triangle wide counts its edges across); a closed region uses the
+smallest extent of its vertices along their principal axes.  A thickness above the width
+is refused.
 
 Degenerate input: NaN/inf, bad indices and zero-area triangles (coincident or collinear
 vertices: no normal, and the unfolding of the mid-surface refuses them) raise
@@ -304,8 +305,11 @@ def folded_triangles(V, W, F) -> np.ndarray:
 
 
 def region_width(V, F) -> float:
-    """The region's width in mm (module doc): twice the largest edge-path distance of a vertex
-    from the boundary; a closed region: its smallest extent along its principal axes."""
+    """The region's width in mm (module doc): twice the largest distance from the boundary of
+    a vertex (edge paths) or of the middle of an inner edge joining two border vertices (half
+    its length: a strip one triangle wide has no inner vertex), at least the largest
+    inscribed circle of a triangle; a closed region: its smallest extent along its
+    principal axes.  V (n,3) mm, F (m,3)."""
     topo = MeshTopology(*check_mesh(V, F, "the region", nondegenerate=False))
     used = np.nonzero(topo.used_vertices)[0]
     border = np.nonzero(topo.boundary_vertices)[0]
@@ -317,7 +321,12 @@ def region_width(V, F) -> float:
     E, L = topo.edges, topo.edge_lengths
     G = sp.coo_matrix((L, (E[:, 0], E[:, 1])), shape=(topo.n, topo.n)).tocsr()
     dist = dijkstra(G, directed=False, indices=border, min_only=True)
-    return float(2.0 * dist[used][np.isfinite(dist[used])].max())
+    across = ~topo.boundary_edges & topo.boundary_vertices[E[:, 0]] & topo.boundary_vertices[E[:, 1]]
+    mid = 0.5 * L[across]  # an inner edge from border to border: its middle is about L/2 inside
+    perimeter = L[topo.face_edges].sum(axis=1)
+    incircle = np.divide(4.0 * topo.areas, perimeter, out=np.zeros(topo.m), where=perimeter > 0)
+    r = np.r_[dist[used], mid, 0.5 * incircle]
+    return float(2.0 * r[np.isfinite(r)].max())
 
 
 def check_sheet_thickness(V, F, thickness_mm) -> None:
