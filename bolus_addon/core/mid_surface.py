@@ -35,11 +35,11 @@ normals point to), a true distance in mm.  Where the surface is concave towards 
 side with radius r = 1 / |k2|, the offset surface folds over once t/2 >= r; the offset is
 limited to `CLAMP_FRACTION` r (half the local radius, so it acts where r < t: the
 mid-surface there keeps at least half the skin's radius; continuous in r, unlike a clamp
-only below t/2, where the offset surface would already nearly collapse).  Then no offset triangle may flip against its skin
-triangle nor collapse: its area projected on the skin triangle's normal must stay above
-`MIN_AREA_RATIO` of the skin triangle's and none of its edges may point backwards
-(`folded_triangles`); the offsets of the corners of any triangle that fails are halved
-until none does (folds finer than sigma, which the curvature at sigma does not see).
+only below t/2, where the offset surface would already nearly collapse).  Then no
+offset triangle may flip against its skin triangle nor collapse: its area projected on
+the skin triangle's normal must stay above `MIN_AREA_RATIO` of the skin triangle's and
+none of its edges may point backwards (`folded_triangles`); the offsets of the corners
+of any triangle that fails are halved until none does (folds finer than sigma, which the curvature at sigma does not see).
 `MidSurface.clamped` marks every vertex moved by less than t/2.
 
 Bending (`piece_bending`): per piece the smallest principal radius R_min is taken from
