@@ -39,8 +39,9 @@ only below t/2, where the offset surface would already nearly collapse).  Then n
 offset triangle may flip against its skin triangle nor collapse: its area projected on
 the skin triangle's normal must stay above `MIN_AREA_RATIO` of the skin triangle's and
 none of its edges may point backwards (`folded_triangles`); the offsets of the corners
-of any triangle that fails are halved until none does (folds finer than sigma, which the curvature at sigma does not see).
-`MidSurface.clamped` marks every vertex moved by less than t/2.
+of any triangle that fails are halved until none does (folds finer than sigma, which
+the curvature at sigma does not see).  `MidSurface.clamped` marks every vertex moved by
+less than t/2.
 
 Bending (`piece_bending`): per piece the smallest principal radius R_min is taken from
 the larger principal curvature magnitude kmax = max(|k1|, |k2|) (per triangle: the mean
