@@ -287,8 +287,11 @@ def test_piece_bending_refuses_bad_input():
         piece_bending(V, F, np.r_[piece[:-1], 2], 1.0, [0.0], 0.02)
     with pytest.raises(BolusError, match="piece 1 has no triangles"):
         piece_bending(V, F, piece, 1.0, [0.0, 0.0], 0.02)
-    with pytest.raises(BolusError, match="smoothing scale"):
-        piece_bending(V, F, piece, 1.0, [0.0], 0.02, sigma_mm=-1)
+    for sigma in (-1, np.nan, None, "three"):
+        with pytest.raises(BolusError, match="smoothing scale"):
+            piece_bending(V, F, piece, 1.0, [0.0], 0.02, sigma_mm=sigma)
+        with pytest.raises(BolusError, match="smoothing scale"):
+            mid_surface(V, F, 1.0, sigma_mm=sigma)
 
 
 # ------------------------------------------------------------------------------ thickness check

@@ -167,7 +167,10 @@ def _check_thickness(thickness_mm) -> float:
 
 
 def _check_sigma(sigma_mm) -> float:
-    s = float(sigma_mm)
+    try:
+        s = float(sigma_mm)
+    except (TypeError, ValueError):
+        s = float("nan")
     if not np.isfinite(s) or s < 0:
         raise BolusError(f"the smoothing scale must be 0 or a positive number of mm, got {sigma_mm}")
     return s
