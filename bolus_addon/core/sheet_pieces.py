@@ -104,6 +104,8 @@ SPLIT_DEPTH = 0.3
 #: share of the first leg's length (at least SPLIT_BLOCK_EDGES mean edge lengths): `_split_path`
 SPLIT_BLOCK = 0.5
 SPLIT_BLOCK_EDGES = 3.0
+#: second legs tried per split point (to the nearest boundary vertices first) until both sides are big enough
+SPLIT_ENDS = 16
 PROGRESS_EVERY = 0.5  # seconds between progress calls in the loop
 
 
@@ -154,13 +156,15 @@ class SheetPieces:
 # ------------------------------------------------------------------ internals
 @dataclass
 class _Mesh:
-    """One piece with its darts cut open: Vc (k,3), Fc (f,3) (the piece's triangles in order),
-    origin (k,) row of the caller's V of every vertex, topo of (Vc, Fc)."""
+    """One piece with its darts cut open, as a disk: Vc (k,3), Fc (f,3) (the piece's triangles in
+    order), origin (k,) row of the caller's V of every vertex, topo of (Vc, Fc)."""
 
     Vc: np.ndarray
     Fc: np.ndarray
     origin: np.ndarray
     topo: MeshTopology
+    cut: str = ""  # how a piece with a hole was cut to a disk ("" if it was one)
+    disk_edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))  # those cuts (V ids)
 
 
 @dataclass
@@ -241,10 +245,22 @@ def _edge_keys(pairs: np.ndarray, n: int) -> np.ndarray:
     return np.minimum(pairs[:, 0], pairs[:, 1]) * n + np.maximum(pairs[:, 0], pairs[:, 1])
 
 
-def _piece_mesh(V, F, faces, dart_edges) -> _Mesh:
-    """The piece's triangles F[faces] with every dart edge (d,2) (caller's V ids) inside it cut open."""
+def _is_disk(topo: MeshTopology) -> bool:
+    """One edge-connected manifold piece with Euler characteristic V - E + F = 1: a disk."""
+    chi = int(topo.used_vertices.sum()) - len(topo.edges) + topo.m
+    return bool(chi == 1 and not (topo.vertex_fan_count > 1).any() and not topo.nonmanifold_edges.any()
+                and topo.face_components()[0] == 1)
+
+
+def _piece_mesh(V, F, faces, dart_edges, disk_edges=(), cut_text: str = "") -> _Mesh:
+    """The piece's triangles F[faces] with every dart edge (d,2) (caller's V ids) inside it cut
+    open, then, if that is no disk (a hole), cut to one (`cutting.cut_to_disk`, once per piece:
+    darts and splits then see those cuts as boundary; disk_edges (c,2), cut_text: such a cut
+    made before on the same triangles, cut again like a dart)."""
     F_local, verts = submesh(F, faces)
-    topo = MeshTopology(V[verts], F_local)
+    Vc, Fc, origin, topo = V[verts], F_local, verts, MeshTopology(V[verts], F_local)
+    dart_edges = np.r_[np.asarray(dart_edges, dtype=np.int64).reshape(-1, 2),
+                       np.asarray(disk_edges, dtype=np.int64).reshape(-1, 2)]
     if len(dart_edges):
         n = len(V)
         loc = np.full(n, -1, dtype=np.int64)
@@ -260,8 +276,14 @@ def _piece_mesh(V, F, faces, dart_edges) -> _Mesh:
             if len(cut):
                 Fc, vo = split_along_edges(F_local, cut, topo)
                 origin = verts[vo]
-                return _Mesh(V[origin], Fc, origin, MeshTopology(V[origin], Fc))
-    return _Mesh(V[verts], F_local, verts, topo)
+                Vc = V[origin]
+                topo = MeshTopology(Vc, Fc)
+    if _is_disk(topo):
+        return _Mesh(Vc, Fc, origin, topo, cut_text, np.asarray(disk_edges, dtype=np.int64).reshape(-1, 2))
+    cut = cut_to_disk(Vc, Fc)
+    disk = np.concatenate([np.stack([origin[c[:-1]], origin[c[1:]]], 1) for c in cut.cut_paths])
+    origin = origin[cut.vert_origin]
+    return _Mesh(cut.V, cut.F, origin, MeshTopology(cut.V, cut.F), cut.description if cut.was_cut else "", disk)
 
 
 def _diagnose(mesh: _Mesh, sigma_mm: float) -> _Diagnosis:
@@ -277,14 +299,7 @@ def _diagnose(mesh: _Mesh, sigma_mm: float) -> _Diagnosis:
 def _trial(mesh: _Mesh) -> tuple[float, float]:
     """(EL, EA) of the cheap trial unfolding (module doc): conformal start, a short relaxation
     with the flip penalty, one short L1 refinement round; no overlap correction."""
-    t = mesh.topo
-    chi = int(t.used_vertices.sum()) - len(t.edges) + t.m
-    if chi == 1 and not (t.vertex_fan_count > 1).any() and t.face_components()[0] == 1:
-        Vd, Fd, topo = mesh.Vc, mesh.Fc, t  # a connected surface with Euler characteristic 1: a disk
-    else:
-        cut = cut_to_disk(mesh.Vc, mesh.Fc)
-        Vd, Fd = cut.V, cut.F
-        topo = MeshTopology(Vd, Fd)
+    Vd, Fd, topo = mesh.Vc, mesh.Fc, mesh.topo  # a disk (`_piece_mesh`)
     UV = conformal_unfolding(topo)
     springs = build_springs(topo)
     flip_free = not np.any(signed_areas(UV, topo.F) <= 0)
@@ -365,21 +380,22 @@ def _tangent(topo: MeshTopology, Vc: np.ndarray, w: int, P: np.ndarray) -> np.nd
     return u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
 
 
-def _split_path(mesh: _Mesh, w: int) -> np.ndarray | None:
-    """Boundary -> w -> boundary (local ids), the legs leaving on opposite sides, or None.
+def _split_paths(mesh: _Mesh, w: int):
+    """Boundary -> w -> boundary paths (local ids), the legs leaving on opposite sides, shortest first.
 
     Leg 1: the shortest interior path from w to the boundary.  Leg 2: the shortest from w
     to the same boundary loop with leg 1's vertices blocked and also every vertex within
     `SPLIT_BLOCK` x leg 1's length (at least `SPLIT_BLOCK_EDGES` mean edges) of w that
     lies on leg 1's side of w (tangent plane, direction to leg 1's vertex at that
     distance): the second leg leaves in the opposite half-plane (on a finger tip both legs
-    run down the finger, on a saddle they leave the centre in opposite directions)."""
+    run down the finger, on a saddle they leave the centre in opposite directions).  Yields
+    up to `SPLIT_ENDS` such paths, by the second leg's length (none if w reaches no boundary)."""
     topo, Vc = mesh.topo, mesh.Vc
     bnd = topo.boundary_vertices
     dist, pred = dijkstra(_interior_graph(mesh), indices=w, return_predecessors=True)
     d = np.where(bnd & np.isfinite(dist), dist, np.inf)
     if not np.isfinite(d).any():
-        return None
+        return
     leg1 = _path_to(pred, int(np.argmin(d)))  # b1 ... w
     b1 = int(leg1[0])
     loop = next(lp for lp in boundary_loops(mesh.Fc, topo) if b1 in set(lp.tolist()))
@@ -394,10 +410,9 @@ def _split_path(mesh: _Mesh, w: int) -> np.ndarray | None:
     dist2, pred2 = dijkstra(_interior_graph(mesh, blocked), indices=w, return_predecessors=True)
     cand = np.unique(loop)
     cand = cand[np.isfinite(dist2[cand]) & ~blocked[cand]]
-    if not len(cand):
-        return None
-    leg2 = _path_to(pred2, int(cand[np.argmin(dist2[cand])]))[::-1]  # w ... b2
-    return np.r_[leg1, leg2[1:]]
+    for b2 in cand[np.argsort(dist2[cand], kind="stable")][:SPLIT_ENDS]:
+        leg2 = _path_to(pred2, int(b2))[::-1]  # w ... b2
+        yield np.r_[leg1, leg2[1:]]
 
 
 def _split_faces(mesh: _Mesh, path: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -415,6 +430,25 @@ def _split_faces(mesh: _Mesh, path: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     if ncomp != 2:
         return None
     return comp == comp[0], eid
+
+
+def _split(mesh: _Mesh, w: int):
+    """The first of `_split_paths` through w that separates the piece into two parts of at
+    least `MIN_SPLIT_SHARE` of its area and `MIN_PIECE_TRIANGLES` triangles each:
+    (path, side (f,) bool, edge ids), or "small" if only too small parts came out, or None."""
+    A = mesh.topo.areas
+    small = False
+    for path in _split_paths(mesh, w):
+        res = _split_faces(mesh, path)
+        if res is None:
+            continue
+        side, eid = res
+        if min(A[side].sum(), A[~side].sum()) < MIN_SPLIT_SHARE * A.sum() or \
+                min(side.sum(), (~side).sum()) < MIN_PIECE_TRIANGLES:
+            small = True
+            continue
+        return path, side, eid
+    return "small" if small else None
 
 
 def _score(EL: float, EA: float, max_el: float) -> float:
@@ -450,10 +484,13 @@ class _Run:
         budget = max(self.max_pieces - 1 + MAX_DARTS, 1)
         return 0.8 * min(self.changes / budget, 1.0)
 
-    def prepare(self, p: _Piece, dart_edges=None) -> _Piece:
-        """Mesh (darts cut open) and diagnosis of a piece."""
+    def prepare(self, p: _Piece, dart_edges=None, like: _Piece | None = None) -> _Piece:
+        """Mesh (darts cut open) and diagnosis of a piece; like: a piece with the same triangles
+        whose cut to a disk is reused."""
         if p.mesh is None:
-            p.mesh = _piece_mesh(self.V, self.F, p.faces, self.dart_edges if dart_edges is None else dart_edges)
+            disk = () if like is None else like.mesh.disk_edges
+            p.mesh = _piece_mesh(self.V, self.F, p.faces, self.dart_edges if dart_edges is None else dart_edges,
+                                 disk, "" if like is None else like.mesh.cut)
         if p.diag is None:
             p.diag = _diagnose(p.mesh, self.sigma)
         return p
@@ -486,6 +523,7 @@ class _Run:
             u = unfold_patch(p.mesh.Vc, p.mesh.Fc, method=self.method, refine_rounds=self.refine_rounds,
                              progress=self.pr.sub(lo, hi, head))
             u.vert_origin = p.mesh.origin[u.vert_origin]
+            u.cut = u.cut or p.mesh.cut
             p.full = u
         return p.full
 
@@ -565,7 +603,7 @@ class _Run:
         gpath = mesh.origin[path]
         q = _Piece(p.faces, ndarts=p.ndarts + 1)
         try:
-            self.with_trial(self.prepare(q, np.r_[self.dart_edges, np.stack([gpath[:-1], gpath[1:]], 1)]))
+            self.with_trial(self.prepare(q, np.r_[self.dart_edges, np.stack([gpath[:-1], gpath[1:]], 1)], like=p))
         except BolusError:
             return "none"
         if self.trial_score(q) >= (1.0 - MIN_GAIN) * s0:
@@ -586,15 +624,10 @@ class _Run:
         """A split through w: "kept", "worse", "small" (a side under the minimum) or "none"."""
         mesh, Kd = p.mesh, p.diag.Kd
         self.pr(self.fraction(), f"split {len(self.splits) + 1} (piece {k + 1})", force=True)
-        path = _split_path(mesh, w)
-        res = None if path is None else _split_faces(mesh, path)
-        if res is None:
-            return "none"
-        side, eid = res
-        A = mesh.topo.areas
-        share = min(A[side].sum(), A[~side].sum()) / A.sum()
-        if share < MIN_SPLIT_SHARE or min(side.sum(), (~side).sum()) < MIN_PIECE_TRIANGLES:
-            return "small"
+        res = _split(mesh, w)
+        if res is None or isinstance(res, str):
+            return res or "none"
+        path, side, eid = res
         qa, qb = _Piece(p.faces[side]), _Piece(p.faces[~side])
         try:
             self.with_trial(self.prepare(qa))
