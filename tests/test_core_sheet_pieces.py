@@ -268,3 +268,11 @@ def test_a_tight_target_splits_the_pieces_again():
     assert res.met and len(res.splits) >= 3 and len(res.unfoldings) == len(res.splits) + 1
     assert all(u.EL <= 0.006 and u.flipped == 0 and u.overlaps == 0 for u in res.unfoldings)
     assert_partition(res, F)
+
+
+def test_inconsistent_winding_is_refused_before_any_work():
+    V, F = saddle(n=10)
+    F = F.copy()
+    F[5] = F[5][::-1]
+    with pytest.raises(BolusError, match="consistently oriented"):
+        sheet_pieces(V, F, TARGET)
