@@ -30,23 +30,38 @@ def draw_table(layout, heads, rows, alert=()) -> None:
                 grid.label(text=text)
 
 
+def _radius(R) -> str:
+    return "flat" if R is None else f"{R:.0f}"
+
+
 def draw_pattern_table(layout, t: dict) -> None:
-    """The pattern's pieces; the ones not fit to cut (unfold's warnings) in red, with a red
-    summary line and a few words of advice each."""
+    """The pattern's pieces with their figures and the sheet-or-print advice; the ones not fit
+    to cut (unfold's warnings) in red, with a red summary line and a few words of advice each."""
     rows = t.get("islands", [])
-    bad = [i for i, r in enumerate(rows) if r.get("warn")]
-    draw_table(layout, ("Patch", "EL %", "EA %", "Area", "Flips"), [
-        (r.get("name", f"patch {r['patch']}").removeprefix("patch "), f"{r['EL'] * 100:.1f}",
-         f"{r['EA'] * 100:.1f}", f"{r['area_ratio']:.2f}" if "area_ratio" in r else "-", str(r["flipped"]))
+    bad = [i for i, r in enumerate(rows) if r.get("warn") or r.get("sheet") == "print"]
+    thick = t.get("sheet_thickness_mm", 0.0) > 0
+    heads = ("Piece", "EL %", "EA %", "Area") + (("R mm", "Strain %") if thick else ()) + ("Use",)
+    draw_table(layout, heads, [
+        (r.get("name", f"patch {r['patch']}").removeprefix("patch ").replace(" piece ", "."),
+         f"{r['EL'] * 100:.1f}", f"{r['EA'] * 100:.1f}", f"{r['area_ratio']:.2f}" if "area_ratio" in r else "-")
+        + ((_radius(r.get("R_min_mm")), f"{r['strain'] * 100:.0f}" if "strain" in r else "-") if thick else ())
+        + (r.get("sheet", "-"),)
         for r in rows], alert=bad)
+    if t.get("darts") or t.get("splits"):
+        layout.label(text=f"{t.get('pieces', len(rows))} pieces: {t.get('darts', 0)} darts, "
+                          f"{t.get('splits', 0)} splits", icon="MOD_EDGESPLIT")
+    for u in t.get("unmet", []):
+        row = layout.row()
+        row.alert = True
+        row.label(text=f"Patch {u['patch']} misses Max EL: see the warnings", icon="ERROR")
     if bad:
         col = layout.column(align=True)
         col.alert = True
-        col.label(text=f"{len(bad)} of {len(rows)} pieces not fit to cut (EL/EA > {t.get('warn_pct', 3.0):g} %)",
-                  icon="ERROR")
+        col.label(text=f"{len(bad)} of {len(rows)} pieces not fit to cut from a sheet", icon="ERROR")
         for i in bad:
             r = rows[i]
-            col.label(text=f"{r.get('name', r['patch'])}: {r.get('short_advice') or 'see the warnings'}")
+            why = r.get("short_advice") if r.get("warn") else ""
+            col.label(text=f"{r.get('name', r['patch'])}: {why or r.get('sheet_reason') or 'see the warnings'}")
 
 
 def draw_saliency(box, s, obj):
@@ -87,13 +102,17 @@ def draw_patches(box, s, obj):
              f"{r['max_shift_mm']:.1f} mm") for r in cuts))
 
 def draw_pattern(box, s, obj):
-    box.label(text="3. Flat pattern", icon="UV")
+    box.label(text="3. Sheet pattern", icon="UV")
+    row = box.row(align=True)
+    row.prop(s, "max_el_pct", text="Max EL")
+    row.prop(s, "sheet_thickness_mm", text="Sheet (mm)")
     box.prop(s, "unfold_method")
     row = box.row(align=True)
     row.prop(s, "refine")
     row.prop(s, "gap_mm", text="Gap (mm)")
     op = box.operator("bolus.unfold", icon="MOD_UVPROJECT")
     op.method, op.refine, op.gap_mm = s.unfold_method, s.refine, s.gap_mm
+    op.max_el, op.sheet_thickness_mm = s.max_el_pct, s.sheet_thickness_mm
     pat = None
     if obj is not None:
         pat = obj if PROP_PATTERN_TABLE in obj else bpy.data.objects.get(obj.name + PATTERN_SUFFIX)
@@ -103,8 +122,13 @@ def draw_pattern(box, s, obj):
         draw_pattern_table(box, t)
     box.prop(s, "warn_distortion_pct")
     box.prop(s, "seam_allowance_mm", text="Seam allowance (mm)")
-    op = box.operator("bolus.export_pattern", icon="EXPORT")
-    op.seam_allowance_mm = s.seam_allowance_mm
+    row = box.row(align=True)
+    row.prop(s, "page", text="")
+    row.prop(s, "label", text="ID")
+    row = box.row(align=True)
+    for fmt in ("SVG", "DXF", "PDF"):
+        op = row.operator("bolus.export_pattern", text=fmt, icon="EXPORT")
+        op.seam_allowance_mm, op.page, op.label, op.file_format = s.seam_allowance_mm, s.page, s.label, fmt
 
 def bolus_of(obj):
     """The bolus solid to show figures of: obj itself, its ``<name>_bolus``, or the bolus a part came from."""

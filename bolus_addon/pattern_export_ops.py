@@ -1,8 +1,11 @@
-"""Operator `bolus.export_pattern` (SPEC): the pattern object as a true-scale SVG.
+"""Operator `bolus.export_pattern` (SPEC): the pattern object as a true-scale SVG, DXF or PDF.
 
 The pattern object is read like any region (`mesh_io.read_region`: world coordinates in
-mm, the one place that converts scene units), grouped by patch (`core.pattern_mesh.svg_pieces`)
-and written by `core.pattern_svg.pattern_svg`.
+mm, the one place that converts scene units), grouped by piece (`core.pattern_mesh.export_pieces`),
+its matching marks found from the source vertex of every pattern vertex
+(`core.pattern_marks.pattern_marks`: seams between pieces, darts and joins within one) and
+written by `core.pattern_drawing.write_pattern`, which picks the format from the file's
+extension and writes atomically (nothing half-written is ever left behind).
 """
 from __future__ import annotations
 
@@ -10,15 +13,23 @@ import os
 
 import bpy
 import numpy as np
-from bpy.props import StringProperty
+from bpy.props import EnumProperty, StringProperty
 
 from . import mesh_io
 from .core.errors import BolusError
-from .core.pattern_mesh import svg_pieces, table_rows
-from .core.pattern_svg import pattern_svg
+from .core.pattern_drawing import write_pattern
+from .core.pattern_marks import PatternMarks, pattern_marks
+from .core.pattern_mesh import export_pieces
 from .operators import ATTR_PATCH, BolusOperator
-from .pattern_ops import ATTR_SOURCE_FACE, PATTERN_SUFFIX, PROP_PATTERN_TABLE
-from .properties import seam_allowance_property
+from .pattern_ops import ATTR_PIECE, ATTR_SOURCE_FACE, ATTR_SOURCE_VERTEX, PATTERN_SUFFIX, PROP_PATTERN_TABLE
+from .properties import page_property, seam_allowance_property
+
+FORMATS = {"SVG": ".svg", "DXF": ".dxf", "PDF": ".pdf"}
+FORMAT_ITEMS = [
+    ("SVG", "SVG", "Scalable vector graphics in mm: print from a browser or Inkscape at 100 %"),
+    ("DXF", "DXF", "AutoCAD DXF in mm ($INSUNITS = 4) for a cutting plotter or laser cutter"),
+    ("PDF", "PDF", "PDF at true scale, on one page or tiled on A4 / Letter with overlap and alignment marks"),
+]
 
 
 def pattern_object_for(context) -> bpy.types.Object:
@@ -32,29 +43,64 @@ def pattern_object_for(context) -> bpy.types.Object:
     raise BolusError(f"'{obj.name}' has no pattern yet: run Unfold Patches first")
 
 
-def pattern_pieces(context, pat: bpy.types.Object) -> list[dict]:
-    """The pattern object's pieces in mm, for the SVG (one per patch)."""
-    region = mesh_io.read_region(context, obj=pat, polys=np.ones(len(pat.data.polygons), dtype=bool))
+def _point_ints(me: bpy.types.Mesh, name: str) -> np.ndarray | None:
+    """An INT point attribute of the mesh, or None."""
+    a = me.attributes.get(name)
+    if a is None or a.domain != "POINT" or a.data_type != "INT":
+        return None
+    return mesh_io.get_array(a.data, "value", len(me.vertices), np.int64)
+
+
+def pattern_pieces(context, pat: bpy.types.Object) -> tuple[list[dict], PatternMarks, list[str]]:
+    """The pattern object's pieces in mm and their marks; notes for the user (an old pattern
+    without pieces or source vertices is exported by patch, without matching marks)."""
+    notes = []
+    with mesh_io.object_mode(pat):
+        region = mesh_io.read_region(context, obj=pat, polys=np.ones(len(pat.data.polygons), dtype=bool))
     poly_patch = mesh_io.read_face_labels(pat, ATTR_PATCH)
     if poly_patch is None:
         raise BolusError(f"'{pat.name}' has no '{ATTR_PATCH}' face attribute: run Unfold Patches again")
-    return svg_pieces(region.V, region.F, region.tri_poly, poly_patch, table_rows(pat.get(PROP_PATTERN_TABLE)))
+    poly_piece = mesh_io.read_face_labels(pat, ATTR_PIECE)
+    if poly_piece is None:
+        poly_piece = poly_patch
+        notes.append(f"'{pat.name}' was made before pieces were numbered: exported one outline per patch "
+                     "(unfold again for darts, splits and pieces)")
+    table = mesh_io.json_prop(pat, PROP_PATTERN_TABLE) or {}
+    rows = table.get("islands") if isinstance(table, dict) and "pieces" in table else None
+    P = region.V[:, :2]
+    pieces = export_pieces(P, region.F, region.tri_poly, poly_piece, poly_patch, rows)
+    sv = _point_ints(pat.data, ATTR_SOURCE_VERTEX)
+    if sv is None:
+        notes.append(f"'{pat.name}' has no '{ATTR_SOURCE_VERTEX}': no matching marks (unfold again to get them)")
+        marks = PatternMarks([], [], P)
+    else:
+        marks = pattern_marks(P, region.F, poly_piece[region.tri_poly], sv[region.vert_ids])
+    return pieces, marks, notes
 
 
-def default_svg_path(active_name: str | None, blend_dir: str | None) -> str:
-    """``<source>_pattern.svg`` beside the .blend file (or relative when it is not saved),
+def default_pattern_path(active_name: str | None, blend_dir: str | None, ext: str = ".svg") -> str:
+    """``<source>_pattern<ext>`` beside the .blend file (or relative when it is not saved),
     the source's name also when its pattern object is the active one."""
-    base = (active_name or "pattern").removesuffix(PATTERN_SUFFIX) + "_pattern.svg"
+    base = (active_name or "pattern").removesuffix(PATTERN_SUFFIX) + "_pattern" + ext
     return os.path.join(blend_dir, base) if blend_dir else base
 
 
-def _svg_path(filepath: str) -> str:
-    """The absolute .svg path to write; BolusError when there is none or its folder is missing."""
+def default_svg_path(active_name: str | None, blend_dir: str | None) -> str:
+    """The default SVG path (kept for scripts written against the SVG-only export)."""
+    return default_pattern_path(active_name, blend_dir, ".svg")
+
+
+def export_path(filepath: str, file_format: str) -> str:
+    """The absolute path to write: a name without one of the three extensions gets the
+    format's; BolusError when there is none or its folder is missing."""
     if not filepath:
-        raise BolusError("choose a file to write the SVG to")
+        raise BolusError("choose a file to write the pattern to")
     path = bpy.path.abspath(filepath)
-    if not path.lower().endswith(".svg"):
-        path += ".svg"
+    if os.path.splitext(path)[1].lower() not in FORMATS.values():
+        if os.path.splitext(path)[1] and os.path.splitext(path)[1].lower() not in ("", "."):
+            raise BolusError(f"'{os.path.basename(path)}': the pattern is written as .svg, .dxf or .pdf; "
+                             "give the file one of these extensions")
+        path += FORMATS[file_format]
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise BolusError(f"the folder '{folder}' does not exist")
@@ -62,36 +108,46 @@ def _svg_path(filepath: str) -> str:
 
 
 class BOLUS_OT_export_pattern(BolusOperator, bpy.types.Operator):
-    """Write the pattern as an SVG at true scale (print at 100 %), one labelled outline per patch"""
+    """Write the pattern at true scale as SVG, DXF (mm, for a cutter) or PDF (tiled on A4 / Letter): one labelled outline per piece, numbered matching marks, a 50 mm test square"""
 
     bl_idname = "bolus.export_pattern"
-    bl_label = "Export Pattern (SVG)"
+    bl_label = "Export Pattern"
     bl_options = {"REGISTER"}
 
     filepath: StringProperty(name="File", subtype="FILE_PATH", default="")
-    filter_glob: StringProperty(default="*.svg", options={"HIDDEN"})
+    filter_glob: StringProperty(default="*.svg;*.dxf;*.pdf", options={"HIDDEN"})
+    page: page_property()
+    label: StringProperty(name="Label", default="",
+                          description="Text printed on every piece, e.g. the patient ID")
+    file_format: EnumProperty(name="Format", items=FORMAT_ITEMS, default="SVG",
+                              description="The format when the file name has no extension (.svg, .dxf or .pdf "
+                                          "decides otherwise)")
     seam_allowance_mm: seam_allowance_property()
 
     def invoke(self, context, event):
         if not self.filepath:
             obj = context.active_object
-            self.filepath = default_svg_path(obj.name if obj is not None else None,
-                                             bpy.path.abspath("//") if bpy.data.filepath else None)
+            self.filepath = default_pattern_path(obj.name if obj is not None else None,
+                                                 bpy.path.abspath("//") if bpy.data.filepath else None,
+                                                 FORMATS[self.file_format])
+        self.filter_glob = "*" + FORMATS[self.file_format]
         context.window_manager.fileselect_add(self)
         return {"RUNNING_MODAL"}
 
     def run(self, context):
-        path = _svg_path(self.filepath)
+        path = export_path(self.filepath, self.file_format)
         pat = pattern_object_for(context)
-        pieces = pattern_pieces(context, pat)
-        svg = pattern_svg(pieces, seam_allowance_mm=self.seam_allowance_mm,
-                          title=f"{pat.get('bolus_source', pat.name)}: bolus pattern")
-        try:
-            with open(path, "w", encoding="utf-8") as fh:
-                fh.write(svg)
-        except OSError as exc:
-            raise BolusError(f"could not write '{path}': {exc.strerror or exc}") from exc
-        self.report({"INFO"}, f"Wrote {len(pieces)} patches to {path} (print at 100 %, check the 50 mm bar)")
+        pieces, marks, notes = pattern_pieces(context, pat)
+        info = write_pattern(path, pieces, marks, page=self.page, label=self.label,
+                             title=f"{pat.get('bolus_source', pat.name)}: bolus pattern",
+                             seam_allowance_mm=self.seam_allowance_mm)
+        for note in notes:
+            self.report({"INFO"}, note)
+        pages = info.get("pages", 1) if isinstance(info, dict) else 1
+        seams = sum(1 for s in marks.seams if not s.is_join)
+        self.report({"INFO"}, f"Wrote {len(pieces)} pieces ({seams} numbered seams, {len(marks.darts)} darts) to "
+                              f"{path}" + (f" on {pages} pages" if pages > 1 else "")
+                    + ": print at 100 % (no fit to page) and measure the 50 mm square before cutting")
         return {"FINISHED"}
 
 

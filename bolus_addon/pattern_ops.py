@@ -18,14 +18,19 @@ from mathutils import Matrix
 
 from . import mesh_io
 from .core.colormap import diverging_linear_rgba
-from .core.pattern_mesh import build_pattern, diagnose_pieces, patch_islands, pattern_messages
+from .core.errors import BolusError
+from .core.mid_surface import check_sheet_thickness, mid_surface, piece_bending, principal_curvatures
+from .core.pattern_mesh import (add_sheet_figures, build_pattern, collect_pieces, diagnose_pieces, patch_islands,
+                                pattern_messages, sheet_messages)
 from .core.piece_advice import DEFAULT_WARN_FRACTION
 from .core.saliency import DEFAULT_SMOOTHING_MM
-from .core.unfold import iter_unfold_patches
+from .core.sheet_pieces import iter_sheet_pieces
 from .operators import ATTR_PATCH, BolusOperator
-from .properties import gap_property, refine_property, unfold_method_property
+from .properties import gap_property, max_el_property, refine_property, sheet_thickness_property, unfold_method_property
 
 ATTR_SOURCE_FACE = "bolus_source_face"
+ATTR_PIECE = "bolus_piece"
+ATTR_SOURCE_VERTEX = "bolus_source_vertex"
 ATTR_AREA_COLOR = "bolus_area_distortion"
 ATTR_AREA_ERROR = "bolus_area_error"
 PROP_PATTERN_TABLE = "bolus_pattern_table"
@@ -34,11 +39,23 @@ PATTERN_SUFFIX = "_pattern"
 AREA_COLOR_RANGE = 0.1
 
 
-class _UnfoldJob:
-    """The state of one unfolding: inputs, the patch iterator and the finished patches."""
+def check_max_el(max_el_pct: float) -> float:
+    """The EL target as a fraction; BolusError for a value the refinement cannot work to."""
+    if not np.isfinite(max_el_pct) or max_el_pct < 0 or 0 < max_el_pct < 0.1:
+        raise BolusError(f"Max EL must be 0 (no darts or splits) or at least 0.1 %, got {max_el_pct:g} %")
+    return float(max_el_pct) / 100.0
 
-    def __init__(self, context, method: str, refine: bool, gap_mm: float, progress=None):
+
+class _UnfoldJob:
+    """The state of one unfolding: inputs, the island iterator and the finished islands."""
+
+    def __init__(self, context, method: str, refine: bool, gap_mm: float, max_el_pct: float = 0.0,
+                 thickness_mm: float = 0.0, progress=None):
         """progress(fraction, text): the core's progress (overall fraction, "patch k/n: step")."""
+        self.max_el = check_max_el(max_el_pct)
+        if not np.isfinite(thickness_mm) or thickness_mm < 0:
+            raise BolusError(f"the sheet thickness must be 0 (unfold the skin) or a length in mm, got {thickness_mm:g}")
+        self.thickness = float(thickness_mm)
         self.region = region = mesh_io.read_region(context)
         self.warnings = list(region.warnings)
         self.infos: list[str] = []
@@ -52,23 +69,47 @@ class _UnfoldJob:
         if self.islands.left_out:  # expected when a region was segmented: said once, as INFO
             self.infos.append(f"{self.islands.left_out} faces outside the segmented patches (bolus_patch = -1) "
                               "were left out of the pattern")
-        self.poly_labels = poly_labels
-        self.gap_mm = gap_mm
-        self.iter = iter_unfold_patches(region.V, region.F, self.islands.islands, method=method.lower(),
-                                        refine_rounds=3 if refine else 0, progress=progress)
-        self.done: list = []
-        self.count = self.islands.count
         settings = getattr(context.scene, "bolus", None)
         self.warn_pct = float(getattr(settings, "warn_distortion_pct", DEFAULT_WARN_FRACTION * 100.0))
         self.sigma_mm = float(getattr(settings, "smoothing_mm", DEFAULT_SMOOTHING_MM))
+        self.curvatures = None
+        self.V_ref = self._reference(region)
+        self.poly_labels = poly_labels
+        self.gap_mm = gap_mm
+        self.iter = iter_sheet_pieces(self.V_ref, region.F, self.islands.islands, max_el=self.max_el,
+                                      sigma_mm=self.sigma_mm, method=method.lower(),
+                                      refine_rounds=3 if refine else 0, progress=progress)
+        self.done: list = []
+        self.count = self.islands.count
+
+    def _reference(self, region) -> np.ndarray:
+        """The surface the pattern is unfolded from and measured against: the skin, or with a
+        sheet thickness its mid-surface (SPEC), with a warning where the offset was clamped."""
+        if self.thickness <= 0:
+            return region.V
+        check_sheet_thickness(region.V, region.F, self.thickness)
+        # the skin's principal curvatures, once for the offset's clamp and the bending advice
+        self.curvatures = principal_curvatures(region.V, region.F, self.sigma_mm)
+        mid = mid_surface(region.V, region.F, self.thickness, sigma_mm=self.sigma_mm, curvatures=self.curvatures)
+        n = int(np.count_nonzero(mid.clamped))
+        if n:
+            worst = int(np.argmin(np.where(mid.clamped, mid.offset, np.inf)))
+            self.warnings.append(
+                f"sheet thickness {self.thickness:g} mm: the mid-surface could not be moved out by "
+                f"{self.thickness / 2:g} mm at {n} vertices, where the skin curves inwards more tightly than that "
+                f"(least {mid.offset[worst]:.2f} mm at vertex {int(region.vert_ids[worst])}): a sheet will not "
+                "follow the skin there")
+        self.infos.append(f"pattern unfolded from the mid-surface of a {self.thickness:g} mm sheet (the skin moved "
+                          f"out by {self.thickness / 2:g} mm)")
+        return mid.V
 
     def step(self) -> bool:
-        """Unfold the next island; False when all are done."""
+        """Unfold (and refine) the next island; False when all are done."""
         try:
-            _, _, u = next(self.iter)
+            _, _, res = next(self.iter)
         except StopIteration:
             return False
-        self.done.append(u)
+        self.done.append(res)
         return True
 
 
@@ -95,16 +136,25 @@ def _link_object(context, src: bpy.types.Object, name: str, me: bpy.types.Mesh) 
 
 
 def build_pattern_object(context, job: _UnfoldJob) -> bpy.types.Object:
-    """Create (or refill) ``<name>_pattern`` from a finished job; returns it (job.build: the figures)."""
+    """Create (or refill) ``<name>_pattern`` from a finished job; returns it (job.build: the
+    figures, job.layout: the pieces, darts and splits)."""
     region = job.region
     src = region.obj
-    b = build_pattern(region.V, region.F, region.tri_poly, region.vert_ids, job.islands, job.done, job.poly_labels,
-                      *mesh_io.polygon_corners(region.mesh), mm_per_unit=region.mm_per_unit, gap_mm=job.gap_mm)
-    diagnose_pieces(region.V, region.F, job.islands, job.done, b.rows, job.warn_pct / 100.0, job.sigma_mm)
+    job.layout = lay = collect_pieces(job.islands, job.done)
+    b = build_pattern(job.V_ref, region.F, region.tri_poly, region.vert_ids, lay.islands, lay.unfoldings,
+                      job.poly_labels, *mesh_io.polygon_corners(region.mesh), mm_per_unit=region.mm_per_unit,
+                      gap_mm=job.gap_mm)
+    diagnose_pieces(job.V_ref, region.F, lay.islands, lay.unfoldings, b.rows, job.warn_pct / 100.0, job.sigma_mm)
+    # the EL limit of the advice: the target, or with refinement off the user's warning threshold
+    bending = piece_bending(region.V, region.F, lay.islands.islands, job.thickness, [r["EL"] for r in b.rows],
+                            job.max_el or job.warn_pct / 100.0, sigma_mm=job.sigma_mm, curvatures=job.curvatures)
+    add_sheet_figures(b.rows, lay, bending)
     name = src.name + PATTERN_SUFFIX
     me = mesh_io.new_mesh(name, b.co, b.polygons.corner_pat, b.polygons.loop_starts)
     mesh_io.write_attribute(me, ATTR_SOURCE_FACE, "INT", "FACE", b.polygons.polys)
     mesh_io.write_attribute(me, ATTR_PATCH, "INT", "FACE", b.poly_patch)
+    mesh_io.write_attribute(me, ATTR_PIECE, "INT", "FACE", b.poly_piece)
+    mesh_io.write_attribute(me, ATTR_SOURCE_VERTEX, "INT", "POINT", region.vert_ids[b.vert_source])
     mesh_io.write_attribute(me, ATTR_AREA_ERROR, "FLOAT", "FACE", b.area_error)
     mesh_io.write_face_colors(me, ATTR_AREA_COLOR, diverging_linear_rgba(b.area_error, AREA_COLOR_RANGE))
     obj = _link_object(context, src, name, me)
@@ -112,18 +162,25 @@ def build_pattern_object(context, job: _UnfoldJob) -> bpy.types.Object:
     obj["bolus_EL"] = el
     obj["bolus_EA"] = ea
     obj["bolus_source"] = src.name
-    obj[PROP_PATTERN_TABLE] = json.dumps({"EL": el, "EA": ea, "flipped": flipped, "warn_pct": job.warn_pct,
-                                          "islands": b.rows})
+    obj["bolus_sheet_thickness_mm"] = job.thickness
+    obj["bolus_max_el"] = job.max_el
+    obj[PROP_PATTERN_TABLE] = json.dumps({
+        "EL": el, "EA": ea, "flipped": flipped, "warn_pct": job.warn_pct, "max_el": job.max_el,
+        "sheet_thickness_mm": job.thickness, "pieces": len(b.rows), "darts": len(lay.darts),
+        "splits": len(lay.splits), "unmet": [{"patch": p, "reason": r} for p, r in lay.unmet],
+        "islands": b.rows})
     job.build = b
     return obj
 
 
 class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
-    """Unfold every patch into a flat, true-scale pattern object (mass-spring with crossed springs, ch. 4.5)"""
+    """Unfold every patch into a flat, true-scale pattern object (mass-spring with crossed springs, ch. 4.5), with darts and splits where a patch would exceed Max EL"""
 
     bl_idname = "bolus.unfold"
     bl_label = "Unfold Patches"
 
+    max_el: max_el_property()
+    sheet_thickness_mm: sheet_thickness_property()
     method: unfold_method_property()
     refine: refine_property()
     gap_mm: gap_property()
@@ -144,7 +201,8 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
         return True
 
     def run(self, context):
-        job = _UnfoldJob(context, self.method, self.refine, self.gap_mm, progress=self.progress)
+        job = _UnfoldJob(context, self.method, self.refine, self.gap_mm, self.max_el, self.sheet_thickness_mm,
+                         progress=self.progress)
         while job.step():
             self.progress(len(job.done) / job.count, f"{len(job.done)}/{job.count} islands unfolded")
         return self.finish(context, job)
@@ -155,14 +213,19 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
         self.warn_all(job.warnings)
         for msg in job.infos:
             self.report({"INFO"}, msg)
-        for level, msg in pattern_messages(job.done, job.build.rows, job.build.errors, job.warn_pct, obj.name):
+        msgs = pattern_messages(job.layout.unfoldings, job.build.rows, job.build.errors, job.warn_pct, obj.name)
+        last = [m for m in msgs if m[1].endswith("see the advice above")]  # the status bar shows the last report
+        msgs = [m for m in msgs if m not in last]
+        msgs += sheet_messages(job.build.rows, job.layout, job.max_el, job.thickness) + last
+        for level, msg in msgs:
             self.report({level}, msg)
         return {"FINISHED"}
 
     # interactive: one island per timer tick, Esc cancels.  BolusOperator guards both:
     # errors become reports (abort() first for modal), no window falls back to execute.
     def invoke(self, context, event):
-        self._job = _UnfoldJob(context, self.method, self.refine, self.gap_mm, progress=self.progress)
+        self._job = _UnfoldJob(context, self.method, self.refine, self.gap_mm, self.max_el, self.sheet_thickness_mm,
+                         progress=self.progress)
         wm = context.window_manager
         wm.progress_begin(0, 100)
         self._timer = wm.event_timer_add(0.01, window=context.window)

@@ -13,9 +13,14 @@ operators as a modeler does:
 2. bolus.segment           -> out/patches.png (jagged borders along mesh edges)
 3. bolus.smooth_cuts       -> out/cuts.png (the borders replaced by smooth cut lines;
                               close-ups before and after: cuts_before.png, cuts_after.png)
-4. bolus.unfold            -> out/pattern.png (the flat pattern, coloured by area distortion);
-                              pieces not fit to cut (EL or EA above 3 %) are warned with advice
-5. bolus.export_pattern    -> out/pattern.svg (true scale: print at 100 %)
+4. bolus.unfold            -> out/pattern.png (the flat pattern of the mid-surface of a
+                              --sheet-thickness mm (5) sheet, coloured by area distortion): a
+                              patch above --max-el % (2) gets darts and splits; every piece gets
+                              its bending strain and the sheet-or-print advice; pieces not fit to
+                              cut are warned with their figures
+5. bolus.export_pattern    -> out/pattern.svg, out/pattern.dxf (mm, for a cutter) and
+                              out/pattern_a4.pdf (tiled on A4): true scale, pieces labelled with
+                              --label, numbered matching marks, dart marks, a 50 mm test square
 6. bolus.make_shell        -> the object face_bolus: a closed --thickness mm (10) solid on the
                               area, --label engraved; out/section.png (a cross-section through
                               the nose tip: the bolus filled, the skin a line, 10 mm bar)
@@ -52,6 +57,9 @@ def parse_args():
     ap.add_argument("--radius", type=float, default=45.0, help="treatment area: faces within this many mm of the nose tip")
     ap.add_argument("--patches", type=int, default=4)
     ap.add_argument("--parts", type=int, default=3, help="print parts")
+    ap.add_argument("--max-el", type=float, default=2.0, help="unfold's EL target in %% (darts and splits); 0 = off")
+    ap.add_argument("--sheet-thickness", type=float, default=5.0,
+                    help="sheet thickness in mm: the pattern of the mid-surface, bending advice; 0 = the skin")
     ap.add_argument("--thickness", type=float, default=10.0, help="bolus thickness in mm")
     ap.add_argument("--shell-resolution", type=float, default=0.5, help="make_shell's resolution in mm")
     ap.add_argument("--label", default="DEMO", help="engraved on each part with its number")
@@ -267,8 +275,13 @@ def main():
     cuts = json.loads(obj["bolus_cut_table"])
     render(obj, "bolus_patch_color", out / "cuts.png")
     render_closeup(obj, "bolus_patch_color", out / "cuts_after.png")
-    t_unf = run_op(bpy.ops.bolus.unfold)
-    t_svg = run_op(bpy.ops.bolus.export_pattern, filepath=str((out / "pattern.svg").resolve()), seam_allowance_mm=5.0)
+    t_unf = run_op(bpy.ops.bolus.unfold, max_el=args.max_el, sheet_thickness_mm=args.sheet_thickness)
+    t_svg = run_op(bpy.ops.bolus.export_pattern, filepath=str((out / "pattern.svg").resolve()), seam_allowance_mm=5.0,
+                   label=args.label)
+    run_op(bpy.ops.bolus.export_pattern, filepath=str((out / "pattern.dxf").resolve()), seam_allowance_mm=5.0,
+           label=args.label)
+    run_op(bpy.ops.bolus.export_pattern, filepath=str((out / "pattern_a4.pdf").resolve()), seam_allowance_mm=5.0,
+           label=args.label, page="A4")
     pattern = bpy.data.objects[obj.name + "_pattern"]
     pattern_table = json.loads(pattern["bolus_pattern_table"])
 
@@ -345,13 +358,19 @@ def main():
         f"{pattern_table['flipped']} flipped faces (SPEC measures)"
     )
     warn_pct = pattern_table.get("warn_pct", 3.0)
-    lines.append(f"{'piece':>16} {'triangles':>10} {'EL %':>7} {'EA %':>7} {'area':>6} {'flipped':>8} "
-                 f"{'excess':>7} {'deficit':>7}  fit to cut (EL, EA <= {warn_pct:g} %, no flips/overlaps)")
+    lines.append(f"Sheet {pattern_table.get('sheet_thickness_mm', 0):g} mm, Max EL {pattern_table.get('max_el', 0) * 100:g} %: "
+                 f"{pattern_table.get('pieces', len(pattern_table['islands']))} pieces, {pattern_table.get('darts', 0)} darts, "
+                 f"{pattern_table.get('splits', 0)} splits")
+    lines.append(f"{'piece':>18} {'triangles':>10} {'EL %':>7} {'EA %':>7} {'area':>6} {'flipped':>8} {'darts':>6} "
+                 f"{'R mm':>6} {'strain %':>8}  use   fit to cut (EL, EA <= {warn_pct:g} %, no flips/overlaps)")
     for r in pattern_table["islands"]:
-        lines.append(f"{r.get('name', r['patch']):>16} {r['faces']:>10} {r['EL'] * 100:>7.3f} {r['EA'] * 100:>7.3f} "
-                     f"{r.get('area_ratio', float('nan')):>6.3f} {r['flipped']:>8} {r.get('excess_rad') or 0:>7.2f} "
-                     f"{r.get('deficit_rad') or 0:>7.2f}  {'NO: ' + r['short_advice'] if r.get('warn') else 'yes'}"
-                     + (f"  ({r['cut']})" if r["cut"] else ""))
+        R = r.get("R_min_mm")
+        lines.append(f"{r.get('name', r['patch']):>18} {r['faces']:>10} {r['EL'] * 100:>7.3f} {r['EA'] * 100:>7.3f} "
+                     f"{r.get('area_ratio', float('nan')):>6.3f} {r['flipped']:>8} {r.get('darts', 0):>6} "
+                     f"{'flat' if R is None else f'{R:.0f}':>6} {r.get('strain', 0) * 100:>8.0f}  {r.get('sheet', '-'):<5} "
+                     f"{'NO: ' + r['short_advice'] if r.get('warn') else 'yes'}" + (f"  ({r['cut']})" if r["cut"] else ""))
+    for u in pattern_table.get("unmet", []):
+        lines.append(f"  patch {u['patch']} misses Max EL: {u['reason']}")
     bad = [r for r in pattern_table["islands"] if r.get("warn")]
     if bad:
         lines.append(f"{len(bad)} of {len(pattern_table['islands'])} pieces are not fit to cut as they are "
@@ -359,6 +378,7 @@ def main():
         lines += [f"  {r['name']}: {r['advice']}" for r in bad]
     else:
         lines.append(f"Every piece is fit to cut (EL and EA at most {warn_pct:g} %).")
+    lines += [f"  {r['name']}: {r['sheet_reason']}" for r in pattern_table["islands"] if r.get("sheet") == "print"]
     lines.append(f"Bolus '{bolus.name}': {shell['bolus_thickness_mm']:g} mm asked, wall "
                  f"{shell['bolus_thickness_min_mm']:.2f} / {shell['bolus_thickness_mean_mm']:.2f} / "
                  f"{shell['bolus_thickness_max_mm']:.2f} mm (min / mean / max, ray casts from the inner face), "
@@ -382,7 +402,7 @@ def main():
     render_pattern(pattern, out / "pattern.png")
     render_parts([obj, pattern, bolus], parts, out / "parts.png")
     bpy.ops.wm.save_as_mainfile(filepath=str((out / "demo.blend").resolve()))
-    print(f"wrote {out}/demo.blend, saliency.png, section.png, patches.png, cuts.png, cuts_before.png, cuts_after.png, pattern.png, parts.png, pattern.svg, parts/*.stl, report.json, report.txt")
+    print(f"wrote {out}/demo.blend, saliency.png, section.png, patches.png, cuts.png, cuts_before.png, cuts_after.png, pattern.png, parts.png, pattern.svg, pattern.dxf, pattern_a4.pdf, parts/*.stl, report.json, report.txt")
 
 
 def run_with_addon(fn) -> None:

@@ -134,7 +134,7 @@ def test_panel_shows_pieces_not_fit_to_cut_in_red(bpy_addon, scene):
     ob = make_object(bpy, V, F, scale_length=0.001)
     assert ("prop", "warn_distortion_pct") in draw_panel(bpy)
     assert bpy.ops.bolus.segment(patches=1) == {"FINISHED"}
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}  # one piece, no darts: it stays distorted
     row = json.loads(bpy.data.objects[ob.name + "_pattern"]["bolus_pattern_table"])["islands"][0]
     log = draw_panel(bpy)
     red = [t for kind, t in log if kind == "alert"]
@@ -144,7 +144,7 @@ def test_panel_shows_pieces_not_fit_to_cut_in_red(bpy_addon, scene):
     # raised threshold: unfold again, nothing red
     scene.bolus.warn_distortion_pct = 50.0
     try:
-        assert bpy.ops.bolus.unfold() == {"FINISHED"}
+        assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     finally:
         scene.bolus.property_unset("warn_distortion_pct")
     log = draw_panel(bpy)

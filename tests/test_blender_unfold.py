@@ -1,5 +1,8 @@
 """Blender-side tests of `bpy.ops.bolus.unfold` and `bpy.ops.bolus.export_pattern`.
 
+These test the unfolding itself, one piece per patch (``max_el=0``: no darts or splits);
+darts, splits, the sheet thickness and the DXF / PDF export are in test_blender_sheet.py.
+
 The pattern object is checked the way SPEC says anyone outside the code checks it
 ("Quality measures"): every polygon of ``<name>_pattern`` is fanned from its first
 corner, and the fan triangles' edges and signed areas are compared with the same
@@ -306,7 +309,7 @@ def test_developable_unfolds_exactly(bpy_addon, scene, capfd, maker, scale_lengt
         src.rotation_euler = (0.4, -1.1, 0.7)
         src.scale = (0.5, 0.5, 0.5)
     assert "bolus_patch" not in src.data.attributes
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     out = reports(capfd)
     assert "no 'bolus_patch' attribute" in out, "a mesh without patches is unfolded with a warning"
     pat = pattern_of(bpy, src)
@@ -329,7 +332,7 @@ def test_flat_patch_unfolds_isometrically(bpy_addon, scene):
     bpy = bpy_addon
     V, polys = flat_mixed_sheet()
     src = make_object(bpy, V, polys, name="sheet", scale_length=0.001)
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     pat = pattern_of(bpy, src)
     check_pattern_basics(bpy, src, pat)
     m = spec_measure(bpy, src, pat)
@@ -357,7 +360,7 @@ def test_sixty_degree_cap_has_no_flipped_triangles(bpy_addon, scene):
     bpy = bpy_addon
     V, F = spherical_cap(100.0, 60.0, 4)
     src = make_object(bpy, V, F, name="cap", scale_length=0.001)
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     pat = pattern_of(bpy, src)
     check_pattern_basics(bpy, src, pat)
     m = spec_measure(bpy, src, pat)
@@ -400,7 +403,7 @@ def test_source_faces_map_back(bpy_addon, scene, kind, selection):
         region = centre[:, 2] < 30.0
         assert 0 < region.sum() < npoly
         enter_edit_mode_with_faces(bpy, src, region)
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     if selection:
         assert src.mode == "EDIT", "the operator leaves the user in Edit Mode"
         bpy.ops.object.mode_set(mode="OBJECT")
@@ -478,7 +481,7 @@ def test_segmented_mesh_islands_do_not_overlap(bpy_addon, scene, gap_mm):
     src = load_knee_segmented(bpy, 3)
     labels = attr_array(src.data, "bolus_patch", np.int64)
     kw = {} if gap_mm is None else {"gap_mm": gap_mm}
-    assert bpy.ops.bolus.unfold(**kw) == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0, **kw) == {"FINISHED"}
     pat = pattern_of(bpy, src)
     check_pattern_basics(bpy, src, pat)
     sf = attr_array(pat.data, "bolus_source_face", np.int64)
@@ -519,7 +522,7 @@ def match_loops(parsed: list[np.ndarray], loops: list[dict]) -> list[int]:
 def test_export_pattern_svg_true_scale(bpy_addon, scene, tmp_path):
     bpy = bpy_addon
     src = load_knee_segmented(bpy, 3)
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     pat = pattern_of(bpy, src)
     loops = boundary_loops(bpy, pat)
     assert sorted({lp["patch"] for lp in loops}) == [0, 1, 2]
@@ -569,7 +572,7 @@ def test_export_pattern_missing_folder(bpy_addon, scene, tmp_path):
     bpy = bpy_addon
     V, F = cylinder_piece(na=6, nl=4)
     src = make_object(bpy, V, F, name="skin", scale_length=0.001)
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     folder = tmp_path / "no_such_folder"
     target = folder / "pattern.svg"
     with pytest.raises(RuntimeError, match=r"folder .*no_such_folder.* does not exist"):
@@ -608,7 +611,7 @@ def test_unit_scale_is_honoured(bpy_addon, scene, tmp_path):
         src = make_object(bpy, verts, F, name="cap", scale_length=scale_length)
         src.scale = (obj_scale,) * 3
         src.data.attributes.new("bolus_patch", "INT", "FACE").data.foreach_set("value", labels)
-        assert bpy.ops.bolus.unfold() == {"FINISHED"}
+        assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
         results[case] = pattern_size_mm(bpy, src, tmp_path / f"{case}.svg")
     ref = results["mm_scene"]
     cap_area = 2 * math.pi * 100.0**2 * (1 - math.cos(math.radians(60)))  # the smooth cap, mm²
@@ -638,14 +641,14 @@ def test_source_untouched_and_rerun_replaces_pattern(bpy_addon, scene):
     bpy = bpy_addon
     src = load_knee_segmented(bpy, 3)
     before = object_snapshot(src)
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     assert_same_object(before, object_snapshot(src))
     assert bpy.context.view_layer.objects.active == src, "the source stays active"
     pat = pattern_of(bpy, src)
     n_meshes, n_objects = len(bpy.data.meshes), len(bpy.data.objects)
     ptr_obj, ptr_mesh, nv = pat.as_pointer(), pat.data.as_pointer(), len(pat.data.vertices)
     pat.location = (5.0, 1.0, 2.0)  # the user moved the pattern
-    assert bpy.ops.bolus.unfold(gap_mm=40.0) == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(gap_mm=40.0, max_el=0.0) == {"FINISHED"}
     assert_same_object(before, object_snapshot(src))
     assert pattern_objects(bpy) == [src.name + "_pattern"], "no '<name>_pattern.001'"
     assert len(bpy.data.objects) == n_objects
@@ -672,7 +675,7 @@ def test_unfold_no_active_object(bpy_addon, scene):
     bpy.context.view_layer.objects.active = None
     n = len(bpy.data.meshes)
     with pytest.raises(RuntimeError, match="No active object"):
-        bpy.ops.bolus.unfold()
+        bpy.ops.bolus.unfold(max_el=0.0)
     no_new_pattern(bpy, n)
 
 
@@ -684,7 +687,7 @@ def test_unfold_active_object_not_a_mesh(bpy_addon, scene, tmp_path):
     assert other.type == "EMPTY"
     n = len(bpy.data.meshes)
     with pytest.raises(RuntimeError, match=f"'{other.name}' is not a mesh"):
-        bpy.ops.bolus.unfold()
+        bpy.ops.bolus.unfold(max_el=0.0)
     no_new_pattern(bpy, n)
     with pytest.raises(RuntimeError, match=f"'{other.name}' is not a mesh"):
         bpy.ops.bolus.export_pattern(filepath=str(tmp_path / "never.svg"))
@@ -717,7 +720,7 @@ def test_unfold_degenerate_patch(bpy_addon, scene, case):
     before = object_snapshot(src)
     n = len(bpy.data.meshes)
     with pytest.raises(RuntimeError, match=message):
-        bpy.ops.bolus.unfold()
+        bpy.ops.bolus.unfold(max_el=0.0)
     no_new_pattern(bpy, n)
     assert_same_object(before, object_snapshot(src))
 
@@ -733,7 +736,7 @@ def test_unfold_small_patch_among_good_ones(bpy_addon, scene):
     attr.data.foreach_set("value", labels)
     n = len(bpy.data.meshes)
     with pytest.raises(RuntimeError, match="too small"):
-        bpy.ops.bolus.unfold()
+        bpy.ops.bolus.unfold(max_el=0.0)
     no_new_pattern(bpy, n)
 
 
@@ -745,7 +748,7 @@ def test_unfold_inconsistent_winding(bpy_addon, scene):
     src = make_object(bpy, V, F, name="skin", scale_length=0.001)
     n = len(bpy.data.meshes)
     try:
-        bpy.ops.bolus.unfold()
+        bpy.ops.bolus.unfold(max_el=0.0)
     except RuntimeError as exc:  # refusing is fine, with a message that says what to do
         assert "normal" in str(exc).lower() or "orient" in str(exc).lower(), str(exc)
         no_new_pattern(bpy, n)
@@ -799,7 +802,7 @@ def test_badly_shrunk_cap_is_warned_with_its_figures_and_the_dome_advice(bpy_add
     bpy = bpy_addon
     src = cap_in_one_patch(bpy, 120.0)
     capfd.readouterr()
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     out = reports(capfd)
     pat = pattern_of(bpy, src)
     m = spec_measure(bpy, src, pat)
@@ -820,7 +823,7 @@ def test_badly_shrunk_cap_is_warned_with_its_figures_and_the_dome_advice(bpy_add
     assert row["warn"] and row["kind"] == "deficit" and row["area_ratio"] == pytest.approx(ratio, abs=2e-3)
     # the advice holds: in 4 patches the worst piece is much better
     assert bpy.ops.bolus.segment(patches=4) == {"FINISHED"}
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     worst = max(r["EL"] for r in json.loads(pattern_of(bpy, src)["bolus_pattern_table"])["islands"])
     # today: one piece EL 16.0 %, EA 10.2 %, area 0.91 of the skin; the worst of 4 pieces EL 3.2 % (+-15 %)
     assert worst == pytest.approx(0.0319, rel=0.15), (worst, m["EL"])
@@ -832,7 +835,7 @@ def test_thirty_degree_cap_is_not_warned(bpy_addon, scene, capfd):
     bpy = bpy_addon
     src = cap_in_one_patch(bpy, 30.0)
     capfd.readouterr()
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     out = reports(capfd)
     assert warning_lines(out) == [], out
     row = json.loads(pattern_of(bpy, src)["bolus_pattern_table"])["islands"][0]
@@ -854,7 +857,7 @@ def test_warning_threshold_is_the_scene_setting(bpy_addon, settings, capfd):
     assert settings.warn_distortion_pct == 3.0
     settings.warn_distortion_pct = 40.0
     capfd.readouterr()
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     out = reports(capfd)
     table = json.loads(pattern_of(bpy, src)["bolus_pattern_table"])
     assert table["warn_pct"] == 40.0 and table["islands"][0]["EL"] > 0.1
@@ -863,7 +866,7 @@ def test_warning_threshold_is_the_scene_setting(bpy_addon, settings, capfd):
     row = table["islands"][0]
     limit = round(100 * max(row["EL"], row["EA"]) - 0.5, 1)
     settings.warn_distortion_pct = limit
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     assert any(f"above the {limit:g} % limit" in ln for ln in warning_lines(reports(capfd)))
 
 
@@ -881,7 +884,7 @@ def test_nostril_pocket_gets_the_cavity_advice(bpy_addon, scene, capfd):
     used, inv = np.unique(F[sel], return_inverse=True)
     src = make_object(bpy, V[used], inv.reshape(-1, 3), name="nostril", scale_length=0.001)
     capfd.readouterr()
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     out = reports(capfd)
     piece = [ln for ln in warning_lines(out) if ln.startswith("Warning: Patch 0: EL")]
     assert len(piece) == 1, out
@@ -896,14 +899,14 @@ def test_unfold_with_the_pattern_active_is_refused(bpy_addon, scene):
     """Issue 9 item 7: it used to make '<name>_pattern_pattern'."""
     bpy = bpy_addon
     src = make_object(bpy, *cylinder_piece(na=6, nl=4), name="skin", scale_length=0.001)
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     bpy.context.view_layer.objects.active = pattern_of(bpy, src)
     n = len(bpy.data.meshes)
     with pytest.raises(RuntimeError, match="'skin_pattern' is a pattern made by Unfold: select its source 'skin'"):
-        bpy.ops.bolus.unfold()
+        bpy.ops.bolus.unfold(max_el=0.0)
     assert pattern_objects(bpy) == ["skin_pattern"] and len(bpy.data.meshes) == n
     bpy.context.view_layer.objects.active = src
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     assert pattern_objects(bpy) == ["skin_pattern"]
 
 
@@ -917,7 +920,7 @@ def test_faces_outside_the_patches_are_an_info_said_once(bpy_addon, scene, capfd
     labels = np.where(outside, -1, 0).astype(np.int32)
     src.data.attributes.new("bolus_patch", "INT", "FACE").data.foreach_set("value", labels)
     capfd.readouterr()
-    assert bpy.ops.bolus.unfold() == {"FINISHED"}
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     out = reports(capfd)
     lines = [ln for ln in out.splitlines() if "left out" in ln]
     assert lines == [f"Info: {outside.sum()} faces outside the segmented patches (bolus_patch = -1) were left out "

@@ -28,6 +28,7 @@ import numpy as np
 from .assemble import assemble_pattern
 from .errors import BolusError
 from .measures import polygon_area_error, polygon_errors
+from .mid_surface import SHEET_RADIUS_FACTOR
 from .overlap import as_pattern_arrays, signed_areas
 from .piece_advice import DEFAULT_WARN_FRACTION, piece_advice
 from .saliency import DEFAULT_SMOOTHING_MM
@@ -48,6 +49,7 @@ __all__ = [
     "piece_warning",
     "pattern_messages",
     "svg_pieces",
+    "export_pieces",
     "table_rows",
     "add_sheet_figures",
     "sheet_messages",
@@ -386,7 +388,9 @@ def add_sheet_figures(rows: list[dict], layout: SheetLayout, bending: list | Non
         row["splits"] = layout.splits_of(row["patch"])
         if bending is not None:
             b = bending[k]
-            row.update(R_min_mm=float(b.R_min_mm), strain=float(b.strain), sheet=b.advice, sheet_reason=b.reason)
+            R = float(b.R_min_mm)
+            row.update(R_min_mm=R if np.isfinite(R) else None, strain=float(b.strain), sheet=b.advice,
+                       sheet_reason=b.reason)
 
 
 def sheet_messages(rows: list[dict], layout: SheetLayout, max_el: float, thickness_mm: float) -> list[tuple[str, str]]:
@@ -407,11 +411,12 @@ def sheet_messages(rows: list[dict], layout: SheetLayout, max_el: float, thickne
         out.append(("WARNING", f"Patch {p} misses the {max_el * 100:g} % EL target: {reason}"))
     advised = [r for r in rows if "sheet" in r]
     for r in advised:
-        if r["sheet"] == "print":
-            figures = (f"smallest radius {r['R_min_mm']:.1f} mm, bending strain ±{r['strain'] * 100:.0f} % in a "
-                       f"{thickness_mm:g} mm sheet, " if thickness_mm > 0 else "")
-            out.append(("WARNING", f"{r['name'].capitalize()}: {figures}EL {r['EL'] * 100:.1f} %: use the printed "
-                                   f"bolus here, not a sheet ({r.get('sheet_reason') or 'see its figures'})"))
+        # a piece already warned for its EL / EA gets this only when its bending is the news
+        bends = thickness_mm > 0 and r.get("R_min_mm") is not None and r["R_min_mm"] < SHEET_RADIUS_FACTOR * thickness_mm
+        if r["sheet"] == "print" and (bends or not r.get("warn")):
+            reason = r.get("sheet_reason") or "use the printed bolus"
+            out.append(("WARNING", f"{r['name'].capitalize()}: {reason[0].upper()}{reason[1:]} (EL "
+                                   f"{r['EL'] * 100:.1f} %, EA {r['EA'] * 100:.1f} %)"))
     if advised:
         n_print = sum(r["sheet"] == "print" for r in advised)
         out.append(("INFO", f"Sheet or print: {len(advised) - n_print} piece{'s' * (len(advised) - n_print != 1)} "
@@ -466,4 +471,45 @@ def svg_pieces(P, F, tri_poly, poly_patch, table: dict | None = None) -> list[di
         row = table.get(int(p), {})
         pieces.append({"UV": P[verts], "F": Fp, "label": f"Patch {int(p)}", "EL": row.get("EL"),
                        "EA": row.get("EA")})
+    return pieces
+
+
+def export_pieces(P, F, tri_poly, poly_piece, poly_patch, rows: list[dict] | None = None) -> list[dict]:
+    """The pattern's pieces for `pattern_export.write_pattern`: one per piece, in piece order.
+
+    Parameters
+    ----------
+    P : (n,2) mm - pattern positions as laid out; F : (t,3) its triangles (rows of P)
+    tri_poly : (t,) polygon of every triangle; poly_piece, poly_patch : (p,) piece / patch of
+        every polygon (an old pattern without pieces: pass the patches as the pieces)
+    rows : the pattern table's rows (``bolus_pattern_table`` "islands", indexed by piece),
+        for the name "patch p piece i/k" and the EL / EA printed on each piece
+
+    Returns
+    -------
+    [{"UV" (k,2), "F" (j,3), "verts" (k,) rows of P, "piece", "patch", "label" ("Patch 0
+    piece 1/2"), "EL", "EA"}] (EL / EA None when unknown).
+    """
+    P = np.asarray(P, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] < 2:
+        raise BolusError(f"pattern positions must be an (n, 2) array, got shape {P.shape}")
+    P, F = as_pattern_arrays(P[:, :2], F)
+    tri_poly = np.asarray(tri_poly, dtype=np.int64)
+    poly_piece = np.asarray(poly_piece, dtype=np.int64)
+    poly_patch = np.asarray(poly_patch, dtype=np.int64)
+    if poly_piece.shape != poly_patch.shape:
+        raise BolusError(f"{len(poly_piece)} piece labels for {len(poly_patch)} polygons")
+    if tri_poly.shape != (len(F),) or (len(F) and (tri_poly.min() < 0 or tri_poly.max() >= len(poly_piece))):
+        raise BolusError(f"the pattern needs one polygon per triangle ({len(F)}) among its {len(poly_piece)} "
+                         f"polygons, got {tri_poly.shape[0]} values")
+    by_piece = {int(r.get("island", i)): r for i, r in enumerate(rows or [])}
+    tri_piece = poly_piece[tri_poly]
+    pieces = []
+    for k in np.unique(tri_piece):
+        Fk, verts = submesh(F, tri_piece == k)
+        patch = int(np.bincount(poly_patch[tri_poly[tri_piece == k]] - poly_patch.min()).argmax() + poly_patch.min())
+        row = by_piece.get(int(k), {})
+        name = row.get("name", f"patch {patch}" if k == patch else f"patch {patch} piece {int(k)}")
+        pieces.append({"UV": P[verts], "F": Fk, "verts": verts, "piece": int(k), "patch": patch,
+                       "label": name[0].upper() + name[1:], "EL": row.get("EL"), "EA": row.get("EA")})
     return pieces
