@@ -7,7 +7,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 CORE = ROOT / "bolus_addon" / "core"
 FORBIDDEN = {"bpy", "bmesh", "mathutils", "gpu", "bl_math", "bpy_extras"}
-ALLOWED_THIRD_PARTY = {"numpy", "scipy", "sklearn", "manifold3d"}  # manifold3d: the volume library of issue 11
+ALLOWED_THIRD_PARTY = {"numpy", "scipy", "sklearn", "manifold3d", "ezdxf", "fpdf"}  # manifold3d: the volume library of issue 11; ezdxf, fpdf (fpdf2): the DXF and PDF writers of issue 12
 
 
 def imported_top_modules(path: Path) -> set[str]:
@@ -29,7 +29,7 @@ def test_core_imports_no_blender_module():
         mods = imported_top_modules(f)
         assert not (mods & FORBIDDEN), f"{f.name} imports {mods & FORBIDDEN}"
         unknown = mods - stdlib - ALLOWED_THIRD_PARTY - {"__future__"}
-        assert not unknown, f"{f.name} imports {unknown}: the core may use numpy, scipy and scikit-learn only"
+        assert not unknown, f"{f.name} imports {unknown}: the core may use numpy, scipy, scikit-learn and the bundled libraries only"
 
 
 def test_core_runs_with_blender_modules_blocked():
