@@ -100,21 +100,27 @@ def _objective(springs: Springs, n: int, F, A0, flip_weight: float, area_weights
     return fun
 
 
-def _two_loop(g, S, Y, apply_h0, apply_k):
-    """L-BFGS direction -H g by the two-loop recursion with H0 = gamma K^-1."""
+def _two_loop(g, S, Y, apply_h0, apply_k, SY=None):
+    """L-BFGS direction -H g by the two-loop recursion with H0 = gamma K^-1.
+
+    SY: the products y.s of the pairs (computed once when a pair is stored; the same
+    numbers as computing them here)."""
+    if SY is None:
+        SY = [np.vdot(y_, s_) for s_, y_ in zip(S, Y)]
     q = g.copy()
+    tmp = np.empty_like(q)
     alphas = []
-    for s_, y_ in zip(reversed(S), reversed(Y)):
-        rho = 1.0 / np.vdot(y_, s_)
+    for s_, y_, sy in zip(reversed(S), reversed(Y), reversed(SY)):
+        rho = 1.0 / sy
         a_ = rho * np.vdot(s_, q)
         alphas.append((a_, rho))
-        q -= a_ * y_
+        q -= np.multiply(a_, y_, out=tmp)
     r = apply_h0(q)
     if S:  # scale H0: y ~ (1/gamma) K s  =>  gamma = s.K s / s.y (a matvec, no solve)
-        r *= np.vdot(S[-1], apply_k(S[-1])) / max(np.vdot(S[-1], Y[-1]), 1e-300)
+        r *= np.vdot(S[-1], apply_k(S[-1])) / max(SY[-1], 1e-300)
     for (a_, rho), s_, y_ in zip(reversed(alphas), S, Y):
         b_ = rho * np.vdot(y_, r)
-        r += (a_ - b_) * s_
+        r += np.multiply(a_ - b_, s_, out=tmp)
     return -r
 
 
@@ -163,15 +169,17 @@ def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, 
     e, g = fun(x)
     S: list[np.ndarray] = []
     Y: list[np.ndarray] = []
+    SY: list[float] = []  # y.s of every stored pair
     history = [e]
     it = 0
     t_report = time.perf_counter() + PROGRESS_EVERY
     for it in range(1, max_iter + 1):
-        d = _two_loop(g, S, Y, apply_h0, apply_k)
+        d = _two_loop(g, S, Y, apply_h0, apply_k, SY)
         slope = float(np.vdot(g, d))
         if not slope < 0:  # not a descent direction: forget the history
             S.clear()
             Y.clear()
+            SY.clear()
             d = -apply_h0(g)
             slope = float(np.vdot(g, d))
             if not slope < 0:
@@ -184,9 +192,11 @@ def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, 
         if np.vdot(s_, y_) > CURVATURE_TOL * max(np.vdot(s_, s_), 1e-300):
             S.append(s_)
             Y.append(y_)
+            SY.append(np.vdot(y_, s_))
             if len(S) > memory:
                 S.pop(0)
                 Y.pop(0)
+                SY.pop(0)
         x, e, g = xn, en, gn
         history.append(e)
         if callback is not None:
