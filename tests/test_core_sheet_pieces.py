@@ -142,6 +142,8 @@ def test_bad_limits_are_refused():
         sheet_pieces(V, F, TARGET, max_pieces=0)
     with pytest.raises(BolusError, match="sigma_mm"):
         sheet_pieces(V, F, TARGET, sigma_mm=-1.0)
+    with pytest.raises(BolusError, match="sigma_mm"):
+        sheet_pieces(V, F, TARGET, sigma_mm="wide")
 
 
 def test_target_not_met_within_the_piece_limit_names_the_piece_and_why():
