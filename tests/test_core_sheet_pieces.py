@@ -278,3 +278,9 @@ def test_inconsistent_winding_is_refused_before_any_work():
     F[5] = F[5][::-1]
     with pytest.raises(BolusError, match="consistently oriented"):
         sheet_pieces(V, F, TARGET)
+
+
+def test_without_length_refinement_the_cone_still_gets_its_dart():
+    V, F = cone(rings=15, na=40)
+    res = sheet_pieces(V, F, TARGET, refine_rounds=0)
+    assert res.met and len(res.darts) == 1 and res.unfoldings[0].EL < 0.005

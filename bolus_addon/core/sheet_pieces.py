@@ -313,16 +313,17 @@ def _diagnose(mesh: _Mesh, sigma_mm: float) -> _Diagnosis:
     return _Diagnosis(Kd, D, X, kind)
 
 
-def _trial(mesh: _Mesh) -> tuple[float, float]:
+def _trial(mesh: _Mesh, refine: bool = True) -> tuple[float, float]:
     """(EL, EA) of the cheap trial unfolding (module doc): conformal start, a short relaxation
-    with the flip penalty, one short L1 refinement round; no overlap correction."""
+    with the flip penalty, one short L1 refinement round (refine: as the full unfolding will:
+    refine_rounds 0 skips it); no overlap correction."""
     Vd, Fd, topo = mesh.Vc, mesh.Fc, mesh.topo  # a disk (`_piece_mesh`)
     UV = conformal_unfolding(topo)
     springs = build_springs(topo)
     flip_free = not np.any(signed_areas(UV, topo.F) <= 0)
     UV, _, _ = relax_lbfgs(UV, springs, max_iter=TRIAL_ITERS, tol=TRIAL_TOL, F=topo.F if flip_free else None,
                            A0=topo.areas, flip_weight=TRIAL_FLIP_WEIGHT if flip_free else 0.0)
-    if TRIAL_REFINE_ROUNDS:
+    if refine and TRIAL_REFINE_ROUNDS:
         flip_free = not np.any(signed_areas(UV, topo.F) <= 0)
         UV, _ = refine_lengths_l1(UV, springs, topo.edge_face_count.astype(np.float64), rounds=TRIAL_REFINE_ROUNDS,
                                   max_iter=REFINE_TRIAL_ITERS, F=topo.F if flip_free else None, A0=topo.areas)
@@ -515,7 +516,7 @@ class _Run:
     def with_trial(self, p: _Piece) -> _Piece:
         """The cheap trial of a piece (none for a developable one: (0, 0))."""
         if p.trial is None:
-            p.trial = (0.0, 0.0) if p.diag.kind == "flat" else _trial(p.mesh)
+            p.trial = (0.0, 0.0) if p.diag.kind == "flat" else _trial(p.mesh, self.refine_rounds > 0)
         return p
 
     def trial_score(self, p: _Piece) -> float:
