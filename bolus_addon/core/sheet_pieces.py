@@ -129,8 +129,9 @@ PROGRESS_EVERY = 0.5  # seconds between progress calls in the loop
 @dataclass
 class Dart:
     """A dart: piece (index into `SheetPieces.unfoldings`), path (k,) int vertex indices into
-    the V given, from the boundary vertex to the apex (apex last), defect: the diffused
-    angle defect at the apex (rad, > 0: deficit)."""
+    the V given along mesh edges, from a boundary vertex of the piece (its outline, the side
+    of an earlier dart, or the cut that opened a hole) to the apex (apex last), defect: the
+    diffused angle defect at the apex (rad, > 0: deficit)."""
 
     piece: int
     path: np.ndarray
@@ -139,9 +140,11 @@ class Dart:
 
 @dataclass
 class Split:
-    """A split: pieces (a, b) it separates (indices at the end of the run), path (k,) int
-    vertex indices into V along mesh edges from boundary to boundary, excess: the
-    diffused angle excess at its worst point (rad)."""
+    """A split: pieces (a, b) it separates (indices at the end of the run: the pieces on
+    either side of its worst point, if a piece was split again later), path (k,) int vertex
+    indices into V along mesh edges from boundary to boundary (boundary as for `Dart`),
+    excess: the diffused angle excess at its worst point (rad; 0 for a split through a
+    deficit point)."""
 
     pieces: tuple
     path: np.ndarray
