@@ -650,13 +650,12 @@ class _Run:
             return res or "none"
         path, side, eid = res
         qa, qb = _Piece(p.faces[side]), _Piece(p.faces[~side])
-        try:
-            self.with_trial(self.prepare(qa))
-            self.with_trial(self.prepare(qb))
+        try:  # the larger side first: if it is not better, the other one need not be unfolded
+            for q in sorted((qa, qb), key=lambda q: -len(q.faces)):
+                if self.trial_score(self.with_trial(self.prepare(q))) >= (1.0 - MIN_GAIN) * s0:
+                    return "worse"
         except BolusError:
             return "none"
-        if max(self.trial_score(qa), self.trial_score(qb)) >= (1.0 - MIN_GAIN) * s0:
-            return "worse"
         ef = mesh.topo.edge_faces[eid[int(np.nonzero(path == w)[0][0]) - 1]]
         self.splits.append(_SplitRec(mesh.origin[path], float(max(-Kd[w], 0.0)),
                                      (int(p.faces[ef[0]]), int(p.faces[ef[1]]))))
