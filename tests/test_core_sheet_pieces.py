@@ -167,19 +167,15 @@ def test_a_darted_and_split_mesh_keeps_every_face_in_one_piece():
         sad = ((x - 50.0) ** 2 - y**2) / 60.0
         w = 1.0 / (1.0 + np.exp(-x / 8.0))
         return (1 - w) * cone_z + w * sad
-    V, F = height_field(f, nx=60, ny=30, size=200.0)
+    V, F = height_field(f, nx=40, ny=20, size=200.0)
     V[:, 1] *= 0.5
     res = sheet_pieces(V, F, TARGET, max_pieces=4)
-    assert len(res.darts) + len(res.splits) >= 1
+    assert len(res.darts) >= 1 and len(res.splits) >= 1 and res.met  # measured: 1 dart, 2 splits
     assert_partition(res, F)
     for d in res.darts:
         assert 0 <= d.piece < len(res.unfoldings) and on_mesh_edges(F, d.path)
     for u in res.unfoldings:
-        assert u.flipped == 0 and u.overlaps == 0
-    if res.met:
-        assert all(u.EL <= TARGET for u in res.unfoldings)
-    else:
-        assert "piece" in res.reason
+        assert u.EL <= TARGET and u.flipped == 0 and u.overlaps == 0
 
 
 def test_iter_sheet_pieces_works_in_the_callers_indices():
