@@ -530,7 +530,8 @@ class _Run:
 
         From the angle sums alone: EL above EL_PER_RAD max(D, X) > max_el for sure: no; EL
         at most about EL_HIGH_PER_RAD max(D, X) <= max_el: yes, no trial.  In between the
-        trial decides: above TRIAL_SLACK max_el it misses for sure."""
+        trial decides: EL above TRIAL_SLACK max_el misses for sure (EL only: a short trial's EA
+        still counts flipped triangles that the full unfolding's flip correction removes)."""
         m = max(p.diag.D, p.diag.X)
         if EL_PER_RAD * m > self.max_el:
             return False
