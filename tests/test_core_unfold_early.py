@@ -97,3 +97,29 @@ def test_degenerate_input_with_target(name):
         return
     u = unfold_patch(V, F, target_el=TARGET)
     assert np.isfinite(u.UV).all() and np.isfinite(u.EL) and np.isfinite(u.trial_EL)
+
+
+def _ruffle():
+    """A ruffled disk z = a r^2 sin(6 phi) (1152 triangles): its rim has far more length than
+    a flat disk's, so any flat pattern folds over itself; 14 outline crossings after the
+    relaxation, EL 2.8 %: not hopeless by EL / EA."""
+    return height_field(lambda x, y: 0.025 * (x * x + y * y) * np.sin(6 * np.arctan2(y, x)), 24, 24, 60.0)
+
+
+def test_tangled_outline_skips_the_overlap_correction(monkeypatch):
+    """Without a target: an outline crossing itself at more than TANGLED_CROSSINGS points after
+    the relaxation is flagged and the overlap correction skipped (it spent ~4x the iterations
+    and still left ~1000 triangles overlapping)."""
+    V, F = _ruffle()
+    u = unfold_patch(V, F)
+    assert u.hopeless and "outline crosses itself at 14 points" in u.hopeless_reason
+    assert "angle excess" in u.hopeless_reason
+    assert u.EL < unfold.HOPELESS_EL and u.overlaps > 0
+    monkeypatch.setattr(unfold, "TANGLED_CROSSINGS", 10**9)  # the old behaviour: correct it anyway
+    full = unfold_patch(V, F)
+    assert not full.hopeless and full.overlaps > len(F) // 2  # the correction did not lay it flat
+    assert full.iterations > 3 * u.iterations
+    assert u.EL < 1.05 * full.EL  # and the figures are no worse for skipping it
+    # (patches with a few crossings still get the correction: test_core_unfold's scanned nose
+    # patches have 1-2 after the relaxation and come out without overlaps)
+

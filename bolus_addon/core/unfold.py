@@ -17,8 +17,17 @@ lives in its own module:
 5. the measures EL, EA (`measures`, eqs. 3-30, 3-31) and the flags.
 
 Hopeless patches (EL > `HOPELESS_EL` or EA > `HOPELESS_EA` after relaxation and
-refinement) skip the overlap correction and come back at once with
-``Unfolding.hopeless`` and the figures (angle deficit / excess, eq. 4-1).  A patch that is
+refinement, or an outline that crosses itself at more than `TANGLED_CROSSINGS` points
+after the relaxation) skip the overlap correction and come back at once with
+``Unfolding.hopeless`` and the figures (angle deficit / excess, eq. 4-1).  The crossing
+rule (issue 12 point 2): patches the correction laid flat had at most 8 crossings after
+the relaxation (bench and issue-12 patches up to 43k triangles: nose p1 2, nostril p0 2,
+nefertiti face 2, a 6.8k-triangle nefertiti nose piece 8); every patch with 10 or more
+still overlapped after it: two ICT nostril pieces of 10-12k triangles (15 and 47
+crossings; 133 and 442 triangles overlapping after 17-30 s of correction, 3-7 s and 236 /
+327 without it) and ruffled disks (z = a r^2 sin(k phi), 1152 triangles: 10-16 crossings,
+900-1000 triangles overlapping either way, 2.4-3.3 s with the correction, 0.4-0.5 s
+without).  With ``target_el`` the early decision comes before all of this (`unfold_patch`).  A patch that is
 not a topological disk is cut to one first (`cutting.cut_to_disk`).  `assemble` lays the
 patches out.  The names imported from here before the split (issue 10) are re-exported.
 """
@@ -104,6 +113,7 @@ HOPELESS_EL = 0.10  # a pattern this far off after relaxation cannot be rescued 
 HOPELESS_EA = 0.20
 HOPELESS_FAR = 2.0  # EL above HOPELESS_FAR * HOPELESS_EL after 50 iterations: stop relaxing, it is hopeless
 HOPELESS_STALL = 0.02  # or above HOPELESS_EL and less than 2 % (relative) better over 25 iterations
+TANGLED_CROSSINGS = 9  # outline crossings after the relaxation beyond which the overlap correction is skipped
 QUICK_ITERS = STOP_EVERY  # the cheap trial of the early decision: relaxation iterations before it (``target_el``)
 QUICK_GAIN = 0.6  # the full pipeline's EL is at least this x the trial's EL (0.61-0.89 measured: unfold_patch doc)
 OUTLINE_BIG = 10000  # triangles: larger patches get proportionally fewer outline rounds
@@ -316,8 +326,14 @@ def _refine_stage(run: _Run, UV, flipped: int, rounds: int, far: bool) -> tuple[
     return UV, flipped
 
 
-def _hopeless(EL: float, EA: float, deficit: float, excess: float) -> tuple[bool, str]:
-    """(hopeless, reason): no warning here, the operator warns on EL / EA with the user's threshold."""
+def _hopeless(EL: float, EA: float, deficit: float, excess: float, crossings: int = 0) -> tuple[bool, str]:
+    """(hopeless, reason): no warning here, the operator warns on EL / EA with the user's threshold.
+    crossings: outline crossings after the relaxation (`TANGLED_CROSSINGS`)."""
+    if crossings > TANGLED_CROSSINGS and not (EL > HOPELESS_EL or EA > HOPELESS_EA):
+        return True, (f"after relaxation the outline crosses itself at {crossings} points (more than "
+                      f"{TANGLED_CROSSINGS}); EL {100 * EL:.1f} % / EA {100 * EA:.1f} %, angle deficit {deficit:.2f} rad, "
+                      f"angle excess {excess:.2f} rad: the pattern folds over itself, the overlap correction cannot "
+                      "lay it flat in one piece and was skipped (split the patch)")
     if not (EL > HOPELESS_EL or EA > HOPELESS_EA):
         return False, ""
     return True, (f"after relaxation EL {100 * EL:.1f} % / EA {100 * EA:.1f} % (more than {100 * HOPELESS_EL:g} % / "
@@ -453,8 +469,10 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     UV = _start(run, start)
     st.stage(*PROGRESS["relax"], "relaxing springs")
     far = early = False
+    crossings = 0
     if relax:
         UV, far, early = _relax_stage(run, UV, method, max_iter, target_el)
+        crossings = 0 if far or early else len(boundary_self_intersections(UV, topo.F))
     elif target_el is not None:  # no relaxation: the start is the trial
         run.trial_el = run.errors(UV)[0]
         early = _early_miss(run.trial_el, target_el)
@@ -462,11 +480,14 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         reason = _early_reason(run, float(target_el), deficit, excess)
         return _finish(run, UV, run.flipped(UV), cut, used, method, t0, True, deficit, excess, reason)
     st.stage(*PROGRESS["flips"], "correcting flipped triangles")
-    UV, flipped = _flip_stage(run, UV, far)
-    if relax and refine_rounds > 0 and not (far and flipped):
+    # tangled: the outline crosses itself in many places (a pocket folded over): like far, one
+    # short flip round, no outline correction (it spent 10-30 s there for nothing, module doc)
+    tangled = crossings > TANGLED_CROSSINGS
+    UV, flipped = _flip_stage(run, UV, far or tangled)
+    if relax and refine_rounds > 0 and not ((far or tangled) and flipped):
         st.stage(*PROGRESS["refine"], "length refinement")
-        UV, flipped = _refine_stage(run, UV, flipped, refine_rounds, far)
-    hopeless, reason = _hopeless(*run.errors(UV), deficit, excess)
+        UV, flipped = _refine_stage(run, UV, flipped, refine_rounds, far or tangled)
+    hopeless, reason = _hopeless(*run.errors(UV), deficit, excess, crossings)
     if not hopeless:
         UV, flipped = _outline_stage(run, UV, flipped, refine_rounds if relax else 0)
     if flipped:  # last resort, no relaxation after it: smooth the few folds left away locally
