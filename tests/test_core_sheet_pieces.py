@@ -3,7 +3,7 @@ saddle a split, a developable cylinder nothing; every triangle in exactly one pi
 target, the limits and bad input."""
 import numpy as np
 import pytest
-from meshgen import cylinder_piece, degenerate_variants, height_field, ring_surface
+from meshgen import cylinder_piece, degenerate_variants, height_field, icosphere, ring_surface, torus
 
 from bolus_addon.core import sheet_pieces as sp_mod
 from bolus_addon.core.errors import BolusError
@@ -289,3 +289,16 @@ def test_iter_sheet_pieces_refuses_labels_of_the_wrong_length():
     V, F = saddle(n=6)
     with pytest.raises(BolusError, match="patch labels"):
         list(iter_sheet_pieces(V, F, np.zeros(len(F) - 1, dtype=int)))
+
+
+def test_a_closed_sphere_is_opened_and_cut_into_pieces_that_meet_the_target():
+    V, F = icosphere(3, 40.0)
+    res = sheet_pieces(V, F, TARGET)
+    assert res.met and len(res.unfoldings) >= 2 and len(res.darts) >= 1
+    assert all(u.EL <= TARGET and u.flipped == 0 and u.overlaps == 0 for u in res.unfoldings)
+    assert_partition(res, F)
+
+
+def test_a_handle_is_refused_by_name():
+    with pytest.raises(BolusError, match="handle"):
+        sheet_pieces(*torus(), TARGET)
