@@ -77,7 +77,7 @@ class _UnfoldJob:
         self.poly_labels = poly_labels
         self.gap_mm = gap_mm
         self.iter = iter_sheet_pieces(self.V_ref, region.F, self.islands.islands, max_el=self.max_el,
-                                      sigma_mm=self.sigma_mm, method=method.lower(),
+                                      face_groups=region.tri_poly, sigma_mm=self.sigma_mm, method=method.lower(),
                                       refine_rounds=3 if refine else 0, progress=progress)
         self.done: list = []
         self.count = self.islands.count

@@ -302,3 +302,58 @@ def test_a_closed_sphere_is_opened_and_cut_into_pieces_that_meet_the_target():
 def test_a_handle_is_refused_by_name():
     with pytest.raises(BolusError, match="handle"):
         sheet_pieces(*torus(), TARGET)
+
+
+def diag_cone(n=40):
+    """A cone (apex at the centre, 30 mm high, radius 50 mm) on a grid of quads split along their
+    (1, 1) diagonals (height_field order: triangles k and k + n*n form quad k), cut to an ellipse
+    that is narrow along (1, 1): the shortest cut from the apex to the edge runs along the
+    diagonals.  Returns V, F and the quad of every triangle."""
+    V, F = height_field(lambda x, y: 30.0 * (1 - np.hypot(x, y) / 50.0), nx=n, ny=n, size=100.0)
+    g = np.arange(len(F)) % (len(F) // 2)
+    C = V[F].mean(axis=1)
+    u, v = (C[:, 0] + C[:, 1]) / 2**0.5, (C[:, 0] - C[:, 1]) / 2**0.5
+    keep = (u / 25.0) ** 2 + (v / 45.0) ** 2 <= 1
+    keep &= np.bincount(g, weights=keep, minlength=len(F) // 2)[g] == 2  # whole quads only
+    used, inv = np.unique(F[keep], return_inverse=True)
+    return V[used], inv.reshape(-1, 3), g[keep]
+
+
+def quad_diagonals(F, groups) -> set:
+    """The edge the two triangles of every group share."""
+    out = set()
+    for k in np.unique(groups):
+        t = F[groups == k]
+        if len(t) == 2:
+            out.add(tuple(sorted(set(t[0].tolist()) & set(t[1].tolist()))))
+    return out
+
+
+def path_edges(path) -> set:
+    return {tuple(sorted(e)) for e in zip(path[:-1].tolist(), path[1:].tolist())}
+
+
+def test_face_groups_keep_every_quad_whole():
+    """The Blender layer triangulates quads: with face_groups (the quad of every triangle) no dart
+    or split runs along a quad's diagonal, so every quad stays whole (one pattern vertex per
+    corner).  Without groups the dart of this cone runs along diagonals."""
+    V, F, groups = diag_cone()
+    diagonals = quad_diagonals(F, groups)
+    free = sheet_pieces(V, F, 0.005)
+    assert free.darts and any(path_edges(d.path) & diagonals for d in free.darts), "test setup"
+    res = sheet_pieces(V, F, 0.005, face_groups=groups)
+    assert res.met and res.darts
+    assert not any(path_edges(d.path) & diagonals for d in res.darts)
+    for g in np.unique(groups):
+        assert len(set(res.piece[groups == g].tolist())) == 1
+    # a split of a saddle made of quads
+    V, F = saddle(n=24)
+    groups = np.arange(len(F)) % (len(F) // 2)
+    res = sheet_pieces(V, F, 0.006, face_groups=groups)
+    assert res.met and res.splits
+    assert not any(path_edges(sp.path) & quad_diagonals(F, groups) for sp in res.splits)
+    for g in np.unique(groups):
+        assert len(set(res.piece[groups == g].tolist())) == 1
+    assert_partition(res, F)
+    with pytest.raises(BolusError, match="face_groups must give an integer group for each of the"):
+        sheet_pieces(V, F, 0.02, face_groups=groups[:-1])

@@ -185,6 +185,16 @@ class _Mesh:
     topo: MeshTopology
     cut: str = ""  # how a piece with a hole was cut to a disk ("" if it was one)
     disk_edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))  # those cuts (V ids)
+    locked: np.ndarray | None = None  # (e,) bool, edges of topo inside one face group (a quad's diagonal)
+
+    def with_groups(self, groups: np.ndarray | None) -> "_Mesh":
+        """Lock the edges whose two triangles have the same group (groups (f,) per row of Fc,
+        e.g. the source polygon of every triangle): no dart or split runs along them."""
+        if groups is not None:
+            ef = self.topo.edge_faces
+            both = (ef >= 0).all(axis=1)
+            self.locked = both & (groups[np.maximum(ef[:, 0], 0)] == groups[np.maximum(ef[:, 1], 0)])
+        return self
 
 
 @dataclass
@@ -365,11 +375,13 @@ def _depth(mesh: _Mesh) -> np.ndarray:
 
 def _interior_graph(mesh: _Mesh, blocked=None) -> sp.csr_matrix:
     """Directed edge-length graph: no edge leaves a boundary vertex (paths stop at the
-    boundary) and none touches a blocked vertex."""
+    boundary), none touches a blocked vertex and none is locked (inside a source polygon)."""
     topo = mesh.topo
     E, L = topo.edges, np.maximum(topo.edge_lengths, 1e-12)
     rows, cols, w = np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]], np.r_[L, L]
     keep = ~topo.boundary_vertices[rows]
+    if mesh.locked is not None:
+        keep &= ~np.r_[mesh.locked, mesh.locked]
     if blocked is not None:
         keep &= ~blocked[rows] & ~blocked[cols]
     return sp.csr_matrix((w[keep], (rows[keep], cols[keep])), shape=(topo.n, topo.n))
@@ -483,8 +495,9 @@ def _meets(u: Unfolding, max_el: float) -> bool:
 class _Run:
     """State of one `sheet_pieces` call."""
 
-    def __init__(self, V, F, max_el, max_pieces, sigma_mm, method, refine_rounds, progress):
+    def __init__(self, V, F, max_el, max_pieces, sigma_mm, method, refine_rounds, progress, groups=None):
         self.V, self.F = V, F
+        self.groups = groups  # (m,) the source polygon of every triangle, or None
         self.max_el, self.max_pieces, self.sigma = max_el, max_pieces, sigma_mm
         self.method, self.refine_rounds = method, refine_rounds
         self.pr = _Progress(progress)
@@ -512,6 +525,7 @@ class _Run:
             disk = () if like is None else like.mesh.disk_edges
             p.mesh = _piece_mesh(self.V, self.F, p.faces, self.dart_edges if dart_edges is None else dart_edges,
                                  disk, "" if like is None else like.mesh.cut)
+            p.mesh.with_groups(None if self.groups is None else self.groups[p.faces])
         if p.diag is None:
             p.diag = _diagnose(p.mesh, self.sigma)
         return p
@@ -711,7 +725,7 @@ def _check_winding(F: np.ndarray) -> None:
 
 # ------------------------------------------------------------------ public
 def sheet_pieces(V, F, max_el: float = 0.02, *, max_pieces: int = MAX_PIECES, sigma_mm: float = DEFAULT_SMOOTHING_MM,
-                 method: str = "lbfgs", refine_rounds: int = 3, progress=None) -> SheetPieces:
+                 method: str = "lbfgs", refine_rounds: int = 3, progress=None, face_groups=None) -> SheetPieces:
     """Unfold one patch into sheet pieces with darts and splits until every piece meets ``max_el``.
 
     Parameters
@@ -723,6 +737,9 @@ def sheet_pieces(V, F, max_el: float = 0.02, *, max_pieces: int = MAX_PIECES, si
     sigma_mm : scale of the diffused angle defect (`piece_advice`) choosing dart or split.
     method, refine_rounds : passed to `unfold.unfold_patch` for each final piece.
     progress : progress(fraction in [0, 1], text) about every 0.5 s ("dart 2 on piece 1", ...).
+    face_groups : (m,) int, optional - the source polygon of every triangle (the Blender layer
+        triangulates quads and n-gons): no dart or split runs along an edge inside one group
+        (a quad's diagonal), so every polygon stays whole in one piece.
 
     Returns
     -------
@@ -750,14 +767,25 @@ def sheet_pieces(V, F, max_el: float = 0.02, *, max_pieces: int = MAX_PIECES, si
         return SheetPieces(np.zeros(len(F), dtype=np.int64), [u], [], [], True, "", time.perf_counter() - t0)
     check_mesh(V, F, "the patch", nondegenerate=True, manifold=True, min_faces=3)
     _check_winding(F)
-    run = _Run(V, F, max_el, int(max_pieces), float(sigma_mm), method, refine_rounds, progress)
+    groups = _check_groups(face_groups, len(F))
+    run = _Run(V, F, max_el, int(max_pieces), float(sigma_mm), method, refine_rounds, progress, groups)
     run.run()
     return run.result(t0)
 
 
+def _check_groups(face_groups, m: int) -> np.ndarray | None:
+    """face_groups as an (m,) int array (None stays None); BolusError for a wrong shape."""
+    if face_groups is None:
+        return None
+    g = np.asarray(face_groups)
+    if g.shape != (m,) or (g.size and not np.issubdtype(g.dtype, np.integer)):
+        raise BolusError(f"face_groups must give an integer group for each of the {m} triangles, got shape {g.shape}")
+    return g.astype(np.int64)
+
+
 def iter_sheet_pieces(V, F, labels, max_el: float = 0.02, *, max_pieces: int = MAX_PIECES,
                       sigma_mm: float = DEFAULT_SMOOTHING_MM, method: str = "lbfgs", refine_rounds: int = 3,
-                      progress=None):
+                      progress=None, face_groups=None):
     """`sheet_pieces` for every patch of a labelled mesh, one after the other.
 
     Parameters: V (n,3) mm, F (m,3), labels (m,) patch of every triangle (-1: none); the
@@ -773,6 +801,7 @@ def iter_sheet_pieces(V, F, labels, max_el: float = 0.02, *, max_pieces: int = M
     labels = np.asarray(labels, dtype=np.int64)
     if labels.shape != (len(F),):
         raise BolusError(f"{labels.size} patch labels for {len(F)} triangles")
+    groups = _check_groups(face_groups, len(F))
     ids = np.unique(labels[labels >= 0])
     sizes = np.array([np.count_nonzero(labels == p) for p in ids], dtype=np.float64)
     before = np.concatenate([[0.0], np.cumsum(sizes)]) / max(sizes.sum(), 1.0)
@@ -786,7 +815,8 @@ def iter_sheet_pieces(V, F, labels, max_el: float = 0.02, *, max_pieces: int = M
                 progress(float(lo + (hi - lo) * min(max(f, 0.0), 1.0)), f"{head}: {text}")
         try:
             res = sheet_pieces(V[verts], F_local, max_el, max_pieces=max_pieces, sigma_mm=sigma_mm, method=method,
-                               refine_rounds=refine_rounds, progress=sub)
+                               refine_rounds=refine_rounds, progress=sub,
+                               face_groups=None if groups is None else groups[labels == p])
         except BolusError as exc:
             raise BolusError(f"patch {p}: {exc}") from exc
         for u in res.unfoldings:
