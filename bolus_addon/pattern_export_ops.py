@@ -147,7 +147,8 @@ class BOLUS_OT_export_pattern(BolusOperator, bpy.types.Operator):
         seams = sum(1 for s in marks.seams if not s.is_join)
         self.report({"INFO"}, f"Wrote {len(pieces)} pieces ({seams} numbered seams, {len(marks.darts)} darts) to "
                               f"{path}" + (f" on {pages} pages" if pages > 1 else "")
-                    + ": print at 100 % (no fit to page) and measure the 50 mm square before cutting")
+                    + (": units mm, cut the layer CUT" if path.lower().endswith(".dxf") else
+                       ": print at 100 % (no fit to page) and measure the 50 mm square before cutting"))
         return {"FINISHED"}
 
 

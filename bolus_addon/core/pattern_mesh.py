@@ -149,8 +149,9 @@ def collect_pieces(islands: PatchIslands, results: list) -> SheetLayout:
         unfoldings.extend(res.unfoldings)
         darts.extend((first + d.piece, np.asarray(d.path), float(d.defect)) for d in res.darts)
         splits.extend((p, (first + s.pieces[0], first + s.pieces[1]), np.asarray(s.path)) for s in res.splits)
-        if not res.met:
-            unmet.append((p, res.reason))
+        if not res.met:  # `iter_sheet_pieces` names the island it was given as "patch k": the patch is p
+            reason = res.reason.removeprefix(f"patch {k}: ")
+            unmet.append((p, reason))
     return SheetLayout(PatchIslands(piece, np.asarray(patch_of, dtype=np.int64), islands.left_out), unfoldings,
                        darts, splits, unmet)
 

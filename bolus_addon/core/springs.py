@@ -252,10 +252,83 @@ def area_terms(x: np.ndarray, F: np.ndarray, A0: np.ndarray, n: int, flip_weight
     return e, _area_gradient(Q, F, coef, n, (a, b, c))
 
 
+def _laplacian_pattern(springs: Springs, n: int):
+    """The sparsity pattern of `stiffness_laplacian` for the springs' ends (cached on them):
+    (order, first, pair, off_ptr, full) with full = (rows, cols, positions of the diagonal
+    entries, positions of the off-diagonal ones) of all entries in CSR order; None when three or more
+    springs join one pair of vertices (then the general path sums them)."""
+    cache = springs.__dict__.get("_lap")
+    if cache is not None and cache[0] is springs.ends and cache[1] == n:
+        return cache[2]
+    p, q = springs.ends[:, 0], springs.ends[:, 1]
+    key = np.r_[p * n + q, q * n + p]  # the entries (p, q) and (q, p) of every spring
+    order = np.argsort(key, kind="stable")
+    uniq, first, count = np.unique(key[order], return_index=True, return_counts=True)
+    pattern = None
+    if not len(count) or count.max() <= 2:
+        rows, cols = uniq // n, uniq % n
+        r_all = np.r_[rows, np.arange(n)]
+        c_all = np.r_[cols, np.arange(n)]
+        srt = np.lexsort((c_all, r_all))
+        pos_d = np.nonzero(srt >= len(rows))[0]  # positions of the diagonal entries, in row order
+        pos_o = np.nonzero(srt < len(rows))[0]  # positions of the off-diagonal ones, in their order
+        off_ptr = np.r_[0, np.cumsum(np.bincount(rows, minlength=n))]
+        pattern = (order, first, np.nonzero(count == 2)[0], off_ptr, (r_all[srt], c_all[srt], pos_d, pos_o))
+    springs.__dict__["_lap"] = (springs.ends, n, pattern)
+    return pattern
+
+
+def laplacian_with_shift(springs: Springs, n: int, shift=None):
+    """(K + shift I as CSC, diagonal of K (n,)) for `stiffness_laplacian`; shift None: K itself;
+    shift a function diag -> eps: K + eps I with eps computed from K's diagonal (what
+    `relax` factorises).  The same arrays as scipy's ``(K + eps * identity).tocsc()``."""
+    pattern = _laplacian_pattern(springs, n) if len(springs.ends) else None
+    if pattern is None:
+        K = _laplacian_general(springs, n)
+        diag = K.diagonal()
+        if shift is None:
+            return K, diag
+        return (K + shift(diag) * sp.identity(n, format="csc")).tocsc(), diag
+    order, first, pair, off_ptr, (rows, cols, pos_d, pos_o) = pattern
+    v = np.r_[-springs.stiffness, -springs.stiffness][order]
+    off = v[first]
+    off[pair] = v[first[pair]] + v[first[pair] + 1]
+    rowsum = np.zeros(n)
+    major = np.flatnonzero(np.diff(off_ptr))
+    if len(major):
+        rowsum[major] = np.add.reduceat(off, off_ptr[major])  # as scipy's sum(axis=1)
+    diag = -rowsum  # K = K_off - diags(rowsum): 0 - rowsum on the diagonal
+    dvals = diag.copy()
+    if shift is not None:
+        # K + eps I: diagonal entries of K (where rowsum != 0) + eps, the others 0 + eps
+        dvals = np.where(rowsum != 0, diag + shift(diag), shift(diag))
+    data = np.empty(len(rows))
+    data[pos_d] = dvals
+    data[pos_o] = off
+    keep = data != 0  # sparse sums drop the entries that come out zero
+    data, rows_k, cols_k = data[keep], rows[keep], cols[keep]
+    ptr = np.r_[0, np.cumsum(np.bincount(rows_k, minlength=n))]
+    idx_dtype = np.int32 if max(n, len(data)) < 2**31 - 1 else np.int64
+    # K is symmetric: its CSR arrays are its CSC arrays
+    return sp.csc_matrix((data, cols_k.astype(idx_dtype), ptr.astype(idx_dtype)), shape=(n, n)), diag
+
+
 def stiffness_laplacian(springs: Springs, n: int):
-    """K (n,n) = sum_s c_s (e_p - e_q)(e_p - e_q)^T: the springs' Hessian at rest, per coordinate (CSC)."""
+    """K (n,n) = sum_s c_s (e_p - e_q)(e_p - e_q)^T: the springs' Hessian at rest, per coordinate (CSC).
+
+    Built on the cached pattern (`_laplacian_pattern`; the refinement asks for a new
+    stiffness every round), step for step as the general path `_laplacian_general`
+    (kept for three or more springs on one vertex pair, whose sum order would matter):
+    duplicates summed, the row sums reduced as scipy's ``sum(axis=1)`` does, zero results
+    dropped as sparse sums drop them: the same arrays."""
+    return laplacian_with_shift(springs, n)[0]
+
+
+def _laplacian_general(springs: Springs, n: int):
+    """`stiffness_laplacian` by scipy's COO -> CSR path."""
     p, q = springs.ends[:, 0], springs.ends[:, 1]
     c = springs.stiffness
     K = sp.coo_matrix((np.r_[-c, -c], (np.r_[p, q], np.r_[q, p])), shape=(n, n)).tocsr()
     K = K - sp.diags(np.asarray(K.sum(axis=1)).ravel())
     return K.tocsc()
+
