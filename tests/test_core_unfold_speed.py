@@ -89,3 +89,20 @@ def test_energy_gathers_match_fancy_indexing():
     e2 += 0.5 * float(np.dot(np.ones(len(F)), (A - topo.areas) ** 2))
     assert ea == pytest.approx(e2, rel=1e-15)
     assert np.isfinite(ga).all()
+
+
+def test_refinement_springs_share_the_end_caches():
+    """refine_lengths_l1 builds springs of another stiffness on the same ends: they reuse the
+    caches that depend on the ends only (and the laplacian is still the right one)."""
+    V, F = spherical_cap(100.0, 45.0, 3)
+    s = build_springs(MeshTopology(V, F))
+    n = len(V)
+    stiffness_laplacian(s, n)
+    s.incidence(n)
+    other = s.share_end_caches(Springs(s.ends, s.rest, s.stiffness * 2.0, s.n_tension, s.contour_edges,
+                                       s.contour_rest, s.contour_stiffness))
+    assert other.__dict__["_lap"] is s.__dict__["_lap"] and other.__dict__["_incidence"] is s.__dict__["_incidence"]
+    _same_csc(stiffness_laplacian(other, n), _laplacian_general(other, n))
+    stranger = s.share_end_caches(Springs(s.ends.copy(), s.rest, s.stiffness, s.n_tension, s.contour_edges,
+                                          s.contour_rest, s.contour_stiffness))
+    assert "_lap" not in stranger.__dict__  # other ends: nothing shared

@@ -61,7 +61,8 @@ def refine_lengths_l1(UV, springs: Springs, face_count: np.ndarray, rounds: int 
     X = check_positions(UV, None, "the pattern", int(springs.ends.max()) + 1 if len(springs.ends) else 0)
     nt = springs.n_tension
     no_windows = np.zeros((0, springs.contour_edges.shape[1]), dtype=np.int64)
-    sp_ = Springs(springs.ends, springs.rest, springs.stiffness.copy(), nt, no_windows, np.zeros(0), np.zeros(0))
+    sp_ = springs.share_end_caches(Springs(springs.ends, springs.rest, springs.stiffness.copy(), nt, no_windows,
+                                           np.zeros(0), np.zeros(0)))
     rest = springs.rest[:nt]
     its = 0
     for k in range(rounds):

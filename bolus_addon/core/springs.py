@@ -60,6 +60,15 @@ class Springs:
         """Sparse (s,n) matrix B with B @ Q = Q[p] - Q[q] (cached per n)."""
         return self._incidence_pair(n)[0]
 
+    def share_end_caches(self, other: "Springs") -> "Springs":
+        """Give ``other`` (built on the very same ends array, another stiffness) the caches
+        that depend on the ends only: incidence matrices, end columns, Laplacian pattern."""
+        if other.ends is self.ends:
+            for key in ("_incidence", "_cols", "_lap"):
+                if key in self.__dict__:
+                    other.__dict__.setdefault(key, self.__dict__[key])
+        return other
+
     def _end_columns(self) -> tuple[np.ndarray, np.ndarray]:
         """(p (s,), q (s,)): the spring ends as contiguous arrays (cached; fast np.take gathers)."""
         cols = self.__dict__.get("_cols")
