@@ -27,8 +27,14 @@ still overlapped after it: two ICT nostril pieces of 10-12k triangles (15 and 47
 crossings; 133 and 442 triangles overlapping after 17-30 s of correction, 3-7 s and 236 /
 327 without it) and ruffled disks (z = a r^2 sin(k phi), 1152 triangles: 10-16 crossings,
 900-1000 triangles overlapping either way, 2.4-3.3 s with the correction, 0.4-0.5 s
-without).  With ``target_el`` the early decision comes before all of this (`unfold_patch`).  A patch that is
-not a topological disk is cut to one first (`cutting.cut_to_disk`).  `assemble` lays the
+without).
+
+Early decision (``unfold_patch(target_el=...)``, issue 12 point 2): after the cut, the
+start and a short trial relaxation, a patch that cannot meet an EL target in one piece
+comes back hopeless before the refinement and the overlap correction, so that darts
+and splits (`sheet_pieces`) take over; its rule and calibration are in `unfold_patch`.
+
+A patch that is not a topological disk is cut to one first (`cutting.cut_to_disk`).  `assemble` lays the
 patches out.  The names imported from here before the split (issue 10) are re-exported.
 """
 from __future__ import annotations
@@ -131,8 +137,10 @@ class Unfolding:
     the same order as given, indexing UV; vert_origin (n2,) the input vertex of each
     unfolded vertex (vertices on a cut appear twice).
 
-    hopeless: the patch cannot lie flat in one piece within `HOPELESS_EL` / `HOPELESS_EA`
-    (decided before the overlap correction, which is then skipped: see `unfold_patch`);
+    hopeless: the patch cannot lie flat in one piece within `HOPELESS_EL` / `HOPELESS_EA`,
+    its outline is tangled (`TANGLED_CROSSINGS`), or with ``target_el`` it cannot meet
+    that target (decided before the overlap correction, which is then skipped: see
+    `unfold_patch`);
     angle_deficit / angle_excess: sum over interior vertices of max(0, 2 pi - theta) and
     max(0, theta - 2 pi) in radians (theta the angle sum, eq. 4-1: deficit = cap-like,
     excess = saddle-like material that would overlap); hopeless_reason: the figures
