@@ -17,22 +17,15 @@ lives in its own module:
 5. the measures EL, EA (`measures`, eqs. 3-30, 3-31) and the flags.
 
 Hopeless patches (EL > `HOPELESS_EL` or EA > `HOPELESS_EA` after relaxation and
-refinement, or an outline that crosses itself at more than `TANGLED_CROSSINGS` points
-after the relaxation) skip the overlap correction and come back at once with
-``Unfolding.hopeless`` and the figures (angle deficit / excess, eq. 4-1).  The crossing
-rule (issue 12 point 2): patches the correction laid flat had at most 8 crossings after
-the relaxation (bench and issue-12 patches up to 43k triangles: nose p1 2, nostril p0 2,
-nefertiti face 2, a 6.8k-triangle nefertiti nose piece 8); every patch with 10 or more
-still overlapped after it: two ICT nostril pieces of 10-12k triangles (15 and 47
-crossings; 133 and 442 triangles overlapping after 17-30 s of correction, 3-7 s and 236 /
-327 without it) and ruffled disks (z = a r^2 sin(k phi), 1152 triangles: 10-16 crossings,
-900-1000 triangles overlapping either way, 2.4-3.3 s with the correction, 0.4-0.5 s
-without).
+refinement) skip the overlap correction and come back at once with
+``Unfolding.hopeless`` and the figures (angle deficit / excess, eq. 4-1).
 
 Early decision (``unfold_patch(target_el=...)``, issue 12 point 2): after the cut, the
 start and a short trial relaxation, a patch that cannot meet an EL target in one piece
 comes back hopeless before the refinement and the overlap correction, so that darts
-and splits (`sheet_pieces`) take over; its rule and calibration are in `unfold_patch`.
+and splits (`sheet_pieces`) take over; with a target, an outline that crosses itself at
+more than `TANGLED_CROSSINGS` points after the relaxation is also handed back (split it)
+instead of corrected.  Rules and calibration in `unfold_patch`.
 
 A patch that is not a topological disk is cut to one first (`cutting.cut_to_disk`).  `assemble` lays the
 patches out.  The names imported from here before the split (issue 10) are re-exported.
@@ -119,7 +112,7 @@ HOPELESS_EL = 0.10  # a pattern this far off after relaxation cannot be rescued 
 HOPELESS_EA = 0.20
 HOPELESS_FAR = 2.0  # EL above HOPELESS_FAR * HOPELESS_EL after 50 iterations: stop relaxing, it is hopeless
 HOPELESS_STALL = 0.02  # or above HOPELESS_EL and less than 2 % (relative) better over 25 iterations
-TANGLED_CROSSINGS = 9  # outline crossings after the relaxation beyond which the overlap correction is skipped
+TANGLED_CROSSINGS = 9  # with target_el: outline crossings after the relaxation beyond which the correction is skipped
 QUICK_ITERS = STOP_EVERY  # the cheap trial of the early decision: relaxation iterations before it (``target_el``)
 QUICK_GAIN = 0.6  # the full pipeline's EL is at least this x the trial's EL (0.61-0.89 measured: unfold_patch doc)
 OUTLINE_BIG = 10000  # triangles: larger patches get proportionally fewer outline rounds
@@ -441,6 +434,17 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         issue-12 hard patches 0.03-0.18 s CPU up to 2.2k triangles, 0.4-0.9 s at 4.7-6.4k,
         1.1-1.5 s at 11-12k, against 0.07-0.4, 1.1-5.6 and 5-14 s for the full call).
         method="explicit" has no stop test: its whole relaxation is the trial there.
+        With a target, an outline that crosses itself at more than `TANGLED_CROSSINGS`
+        points after the relaxation is handed back hopeless too (one short flip round,
+        the refinement, no outline correction), for the caller to split.  Of 10 patches
+        with 10-47 crossings the correction laid one flat (an ICT nose piece of 1607
+        triangles, 28 crossings, 0.7 s) and left 9 overlapping: two ICT nostril pieces
+        of 10-12k triangles (133 and 442 triangles after 17-30 s; 3-7 s without it),
+        four ruffled disks z = a r^2 sin(k phi) (~1000 of 1152 after 2.4-3.3 s; 0.4 s
+        without), three ICT / MakeHuman nose pieces of 700-3000 triangles (4-10 after
+        1.3-1.7 s; 4-40 without it, at a lower EL).  Every patch of the bench the
+        correction lays flat has 0-8.  Since crossings do not predict failure for
+        certain, the default (no target) keeps the correction.
 
     Returns
     -------
@@ -483,7 +487,8 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     crossings = 0
     if relax:
         UV, far, early = _relax_stage(run, UV, method, max_iter, target_el)
-        crossings = 0 if far or early else len(boundary_self_intersections(UV, topo.F))
+        if target_el is not None and not (far or early):  # the tangled rule (with a target only)
+            crossings = len(boundary_self_intersections(UV, topo.F))
     elif target_el is not None:  # no relaxation: the start is the trial
         run.trial_el = run.errors(UV)[0]
         early = _early_miss(run.trial_el, target_el)
@@ -491,8 +496,8 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         reason = _early_reason(run, float(target_el), deficit, excess)
         return _finish(run, UV, run.flipped(UV), cut, used, method, t0, True, deficit, excess, reason)
     st.stage(*PROGRESS["flips"], "correcting flipped triangles")
-    # tangled: the outline crosses itself in many places (a pocket folded over): like far, one
-    # short flip round, no outline correction (it spent 10-30 s there for nothing, module doc)
+    # tangled (with a target): the outline crosses itself in many places (a pocket folded over):
+    # like far, one short flip round, no outline correction; the caller splits it (unfold_patch doc)
     tangled = crossings > TANGLED_CROSSINGS
     UV, flipped = _flip_stage(run, UV, far or tangled)
     if relax and refine_rounds > 0 and not ((far or tangled) and flipped):
