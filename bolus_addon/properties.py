@@ -92,7 +92,8 @@ def max_el_property(**kw):
             "its dome points (nose tip, chin) and is split along its grooves until every piece meets it or the "
             "piece limit is reached; 0 = off (one piece per patch)"
         ),
-        default=2.0, min=0.0, soft_max=10.0, precision=1, subtype="PERCENTAGE", **kw,
+        # no hard minimum: a negative value from a script is refused with a message, not clamped to "off"
+        default=2.0, soft_min=0.0, soft_max=10.0, precision=1, subtype="PERCENTAGE", **kw,
     )
 
 
@@ -104,7 +105,7 @@ def sheet_thickness_property(**kw):
             "by half of it) and every piece gets its bending strain and a sheet-or-print advice; 0 = unfold the "
             "skin itself"
         ),
-        default=0.0, min=0.0, soft_max=20.0, precision=1, **kw,
+        default=0.0, soft_min=0.0, soft_max=20.0, precision=1, **kw,
     )
 
 

@@ -106,6 +106,10 @@ def test_max_el_below_a_tenth_of_a_percent_is_refused(bpy_addon, scene):
     before = object_snapshot(src)
     with pytest.raises(RuntimeError, match=r"at least 0\.1 %"):
         bpy.ops.bolus.unfold(max_el=0.05)
+    with pytest.raises(RuntimeError, match=r"Max EL must be 0 .* got -1 %"):
+        bpy.ops.bolus.unfold(max_el=-1.0)
+    with pytest.raises(RuntimeError, match="sheet thickness must be 0"):
+        bpy.ops.bolus.unfold(sheet_thickness_mm=-2.0)
     assert pattern_of(bpy, src) is None
     assert_same_object(before, object_snapshot(src))
 
