@@ -107,8 +107,9 @@ def _ruffle():
 
 
 def test_tangled_outline_is_handed_back_with_a_target(monkeypatch):
-    """With a target: an outline crossing itself at more than TANGLED_CROSSINGS points after
-    the relaxation is handed back hopeless without the overlap correction (which spent ~4x
+    """With a target: an outline crossing itself at more than TANGLED_CROSSINGS points (or more
+    than TANGLED_OVERLAP of the triangles overlapping) after the relaxation is handed back
+    hopeless without the overlap correction (which spent ~4x
     the iterations and still left ~1000 triangles overlapping); without a target the
     correction runs as before."""
     V, F = _ruffle()
@@ -120,7 +121,10 @@ def test_tangled_outline_is_handed_back_with_a_target(monkeypatch):
     assert not full.hopeless and full.overlaps > len(F) // 2  # the correction did not lay it flat
     assert full.iterations > 3 * u.iterations
     assert u.EL < 1.05 * full.EL  # and the figures are no worse for skipping it
-    monkeypatch.setattr(unfold, "TANGLED_CROSSINGS", 10**9)  # the rule off: the target changes nothing
+    monkeypatch.setattr(unfold, "TANGLED_CROSSINGS", 10**9)
+    overlapped = unfold_patch(V, F, target_el=0.05)  # 88 % of its triangles overlap after the relaxation
+    assert overlapped.hopeless and "of its triangles overlap others" in overlapped.hopeless_reason
+    monkeypatch.setattr(unfold, "TANGLED_OVERLAP", 2.0)  # both rules off: the target changes nothing
     same = unfold_patch(V, F, target_el=0.05)
     np.testing.assert_array_equal(same.UV, full.UV)
     # (patches with a few crossings still get the correction: test_core_unfold's scanned nose

@@ -113,6 +113,7 @@ HOPELESS_EA = 0.20
 HOPELESS_FAR = 2.0  # EL above HOPELESS_FAR * HOPELESS_EL after 50 iterations: stop relaxing, it is hopeless
 HOPELESS_STALL = 0.02  # or above HOPELESS_EL and less than 2 % (relative) better over 25 iterations
 TANGLED_CROSSINGS = 9  # with target_el: outline crossings after the relaxation beyond which the correction is skipped
+TANGLED_OVERLAP = 0.10  # with target_el: or this share of the triangles overlapping after the relaxation
 QUICK_ITERS = STOP_EVERY  # the cheap trial of the early decision: relaxation iterations before it (``target_el``)
 QUICK_GAIN = 0.55  # the full pipeline's EL is at least this x the trial's EL (0.55 or more on 204 patches)
 OUTLINE_BIG = 10000  # triangles: larger patches get proportionally fewer outline rounds
@@ -327,14 +328,23 @@ def _refine_stage(run: _Run, UV, flipped: int, rounds: int, far: bool) -> tuple[
     return UV, flipped
 
 
-def _hopeless(EL: float, EA: float, deficit: float, excess: float, crossings: int = 0) -> tuple[bool, str]:
+def _tangled(crossings: int, overlap_share: float) -> str:
+    """'' or what makes a relaxed pattern tangled (`TANGLED_CROSSINGS`, `TANGLED_OVERLAP`)."""
+    if crossings > TANGLED_CROSSINGS:
+        return f"the outline crosses itself at {crossings} points (more than {TANGLED_CROSSINGS})"
+    if overlap_share > TANGLED_OVERLAP:
+        return (f"{100 * overlap_share:.0f} % of its triangles overlap others (more than "
+                f"{100 * TANGLED_OVERLAP:g} %)")
+    return ""
+
+
+def _hopeless(EL: float, EA: float, deficit: float, excess: float, tangled: str = "") -> tuple[bool, str]:
     """(hopeless, reason): no warning here, the operator warns on EL / EA with the user's threshold.
-    crossings: outline crossings after the relaxation (`TANGLED_CROSSINGS`)."""
-    if crossings > TANGLED_CROSSINGS and not (EL > HOPELESS_EL or EA > HOPELESS_EA):
-        return True, (f"after relaxation the outline crosses itself at {crossings} points (more than "
-                      f"{TANGLED_CROSSINGS}); EL {100 * EL:.1f} % / EA {100 * EA:.1f} %, angle deficit {deficit:.2f} rad, "
-                      f"angle excess {excess:.2f} rad: the pattern folds over itself, the overlap correction cannot "
-                      "lay it flat in one piece and was skipped (split the patch)")
+    tangled: `_tangled`'s finding after the relaxation (with a target only)."""
+    if tangled and not (EL > HOPELESS_EL or EA > HOPELESS_EA):
+        return True, (f"after relaxation {tangled}; EL {100 * EL:.1f} % / EA {100 * EA:.1f} %, angle deficit "
+                      f"{deficit:.2f} rad, angle excess {excess:.2f} rad: the pattern folds over itself, the overlap "
+                      "correction cannot lay it flat in one piece and was skipped (split the patch)")
     if not (EL > HOPELESS_EL or EA > HOPELESS_EA):
         return False, ""
     return True, (f"after relaxation EL {100 * EL:.1f} % / EA {100 * EA:.1f} % (more than {100 * HOPELESS_EL:g} % / "
@@ -438,16 +448,21 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         1.1-1.5 s at 11-12k, against 0.07-0.4, 1.1-5.6 and 5-14 s for the full call).
         method="explicit" has no stop test: its whole relaxation is the trial there.
         With a target, an outline that crosses itself at more than `TANGLED_CROSSINGS`
-        points after the relaxation is handed back hopeless too (one short flip round,
-        the refinement, no outline correction), for the caller to split.  Of 10 patches
-        with 10-47 crossings the correction laid one flat (an ICT nose piece of 1607
-        triangles, 28 crossings, 0.7 s) and left 9 overlapping: two ICT nostril pieces
-        of 10-12k triangles (133 and 442 triangles after 17-30 s; 3-7 s without it),
-        four ruffled disks z = a r^2 sin(k phi) (~1000 of 1152 after 2.4-3.3 s; 0.4 s
-        without), three ICT / MakeHuman nose pieces of 700-3000 triangles (4-10 after
-        1.3-1.7 s; 4-40 without it, at a lower EL).  Every patch of the bench the
-        correction lays flat has 0-8.  Since crossings do not predict failure for
-        certain, the default (no target) keeps the correction.
+        points after the relaxation, or a pattern with more than `TANGLED_OVERLAP` of its
+        triangles overlapping others then, is handed back hopeless too (one short flip
+        round, the refinement, no outline correction), for the caller to split.
+        Crossings: of 10 patches with 10-47, the correction laid one flat (an ICT nose
+        piece of 1607 triangles, 28 crossings, 0.7 s) and left 9 overlapping: two ICT
+        nostril pieces of 10-12k triangles (133 and 442 triangles after 17-30 s; 3-7 s
+        without it), four ruffled disks z = a r^2 sin(k phi) (~1000 of 1152 after
+        2.4-3.3 s; 0.4 s without), three ICT / MakeHuman nose pieces of 700-3000
+        triangles (4-10 after 1.3-1.7 s; 4-40 without it, at a lower EL); every bench
+        patch it lays flat has 0-8.  Overlap share: at most 3.6 % on the 11 patches with
+        flips or crossings after the relaxation that the correction laid flat (bench,
+        issue-12 and sweep patches); 15.5 % on a MakeHuman nose piece of 3964 triangles
+        with one crossing, which it left with 760 overlapping after 11-14 s (patches
+        hopeless by EL: 18-24 %).  Neither predicts failure for certain, so the default
+        (no target) keeps the correction.
 
     Returns
     -------
@@ -487,11 +502,14 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     UV = _start(run, start)
     st.stage(*PROGRESS["relax"], "relaxing springs")
     far = early = False
-    crossings = 0
+    tangled = ""
     if relax:
         UV, far, early = _relax_stage(run, UV, method, max_iter, target_el)
         if target_el is not None and not (far or early):  # the tangled rule (with a target only)
             crossings = len(boundary_self_intersections(UV, topo.F))
+            # no flip and no crossing: an embedding, nothing overlaps (no need to count)
+            share = overlapping_faces(UV, topo.F).mean() if crossings or run.flipped(UV) else 0.0
+            tangled = _tangled(crossings, float(share))
     elif target_el is not None:  # no relaxation: the start is the trial
         run.trial_el = run.errors(UV)[0]
         early = _early_miss(run.trial_el, target_el)
@@ -499,14 +517,14 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         reason = _early_reason(run, float(target_el), deficit, excess)
         return _finish(run, UV, run.flipped(UV), cut, used, method, t0, True, deficit, excess, reason)
     st.stage(*PROGRESS["flips"], "correcting flipped triangles")
-    # tangled (with a target): the outline crosses itself in many places (a pocket folded over):
+    # tangled (with a target): the pattern folds over itself (many crossings or much overlap):
     # like far, one short flip round, no outline correction; the caller splits it (unfold_patch doc)
-    tangled = crossings > TANGLED_CROSSINGS
-    UV, flipped = _flip_stage(run, UV, far or tangled)
-    if relax and refine_rounds > 0 and not ((far or tangled) and flipped):
+    short = far or bool(tangled)
+    UV, flipped = _flip_stage(run, UV, short)
+    if relax and refine_rounds > 0 and not (short and flipped):
         st.stage(*PROGRESS["refine"], "length refinement")
-        UV, flipped = _refine_stage(run, UV, flipped, refine_rounds, far or tangled)
-    hopeless, reason = _hopeless(*run.errors(UV), deficit, excess, crossings)
+        UV, flipped = _refine_stage(run, UV, flipped, refine_rounds, short)
+    hopeless, reason = _hopeless(*run.errors(UV), deficit, excess, tangled)
     if not hopeless:
         UV, flipped = _outline_stage(run, UV, flipped, refine_rounds if relax else 0)
     if flipped:  # last resort, no relaxation after it: smooth the few folds left away locally
