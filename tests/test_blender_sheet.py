@@ -200,6 +200,7 @@ def svg_texts(path, cls):
     return [el.text for el in root.iter() if el.tag.endswith("text") and cls in (el.get("class") or "").split()]
 
 
+@pytest.mark.smoke
 def test_export_svg_dxf_pdf_with_dart_marks_and_label(bpy_addon, scene, tmp_path, capfd):
     ezdxf = pytest.importorskip("ezdxf")
     pdfium = pytest.importorskip("pypdfium2")
