@@ -357,3 +357,23 @@ def test_face_groups_keep_every_quad_whole():
     assert_partition(res, F)
     with pytest.raises(BolusError, match="face_groups must give an integer group for each of the"):
         sheet_pieces(V, F, 0.02, face_groups=groups[:-1])
+
+
+def test_a_piece_given_up_on_is_unfolded_with_the_hopeless_target(monkeypatch):
+    """Point 2: a stuck piece's one full unfolding gets target_el = HOPELESS_EL (a tangled or
+    hopeless piece returns after the trial), a piece that meets the target none."""
+    calls = []
+    real = sp_mod.unfold_patch
+
+    def spy(*a, **kw):
+        calls.append(kw.get("target_el"))
+        return real(*a, **kw)
+
+    monkeypatch.setattr(sp_mod, "unfold_patch", spy)
+    V, F = saddle(n=24)
+    res = sheet_pieces(V, F, 0.006, max_pieces=1)  # no split allowed: stuck
+    assert not res.met and "most pieces" in res.reason
+    assert calls == [sp_mod.HOPELESS_EL]
+    calls.clear()
+    res = sheet_pieces(*cylinder_piece(), 0.02)
+    assert res.met and calls == [None]

@@ -62,7 +62,7 @@ from .relax import relax_lbfgs
 from .saliency import DEFAULT_SMOOTHING_MM
 from .springs import build_springs
 from .topology import MeshTopology, check_mesh, submesh
-from .unfold import Unfolding, unfold_patch
+from .unfold import HOPELESS_EL, Unfolding, unfold_patch
 
 __all__ = ["Dart", "Split", "SheetPieces", "sheet_pieces", "iter_sheet_pieces", "MAX_PIECES", "MAX_DARTS",
            "EA_PER_EL", "MIN_MAX_EL"]
@@ -554,10 +554,15 @@ class _Run:
         return self.with_trial(p).trial[0] <= TRIAL_SLACK * self.max_el
 
     def unfold(self, p: _Piece, head: str, lo: float, hi: float) -> Unfolding:
-        """The one full unfolding of a piece (vert_origin into V); its progress mapped into [lo, hi]."""
+        """The one full unfolding of a piece (vert_origin into V); its progress mapped into [lo, hi].
+
+        A piece the refinement gave up on (stuck) is unfolded with ``target_el`` = `HOPELESS_EL`:
+        a near miss (EL a little above max_el) gets the full pipeline and a clean pattern, but a
+        tangled or hopeless one comes back after the trial instead of spending tens of seconds in
+        the overlap correction (issue 12 point 2; it is warned either way)."""
         if p.full is None:
             u = unfold_patch(p.mesh.Vc, p.mesh.Fc, method=self.method, refine_rounds=self.refine_rounds,
-                             progress=self.pr.sub(lo, hi, head))
+                             progress=self.pr.sub(lo, hi, head), target_el=HOPELESS_EL if p.stuck else None)
             u.vert_origin = p.mesh.origin[u.vert_origin]
             u.cut = u.cut or p.mesh.cut
             p.full = u
