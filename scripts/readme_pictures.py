@@ -194,7 +194,8 @@ def render_svg(svg_path: Path, out: Path) -> None:
     set_resolution(WIDTH_PX, int(round(WIDTH_PX * h / w)))
     cam = scene.camera
     old_cam = (tuple(cam.location), tuple(cam.rotation_euler), cam.data.ortho_scale)
-    cam.location, cam.rotation_euler, cam.data.ortho_scale = (w / 2, h / 2, 100.0), (0.0, 0.0, 0.0), w
+    # an orthographic camera's scale spans the longer side of the image: a page taller than wide needs h
+    cam.location, cam.rotation_euler, cam.data.ortho_scale = (w / 2, h / 2, 100.0), (0.0, 0.0, 0.0), max(w, h)
     tmp = render_to(out.with_suffix(".render.png"))
     write_png(out, read_png(tmp))
     tmp.unlink()
