@@ -455,24 +455,9 @@ def svg_pieces(P, F, tri_poly, poly_patch, table: dict | None = None) -> list[di
     -------
     [{"UV" (k,2), "F" (j,3), "label" "Patch p", "EL", "EA"}] (EL / EA None when unknown).
     """
-    P = np.asarray(P, dtype=np.float64)
-    if P.ndim != 2 or P.shape[1] < 2:
-        raise BolusError(f"pattern positions must be an (n, 2) array, got shape {P.shape}")
-    P, F = as_pattern_arrays(P[:, :2], F)
-    tri_poly = np.asarray(tri_poly, dtype=np.int64)
-    poly_patch = np.asarray(poly_patch, dtype=np.int64)
-    if tri_poly.shape != (len(F),) or (len(F) and (tri_poly.min() < 0 or tri_poly.max() >= len(poly_patch))):
-        raise BolusError(f"the pattern needs one polygon per triangle ({len(F)}) among its {len(poly_patch)} "
-                         f"polygons, got {tri_poly.shape[0]} values")
-    tri_patch = poly_patch[tri_poly]
-    table = table or {}
-    pieces = []
-    for p in np.unique(tri_patch):
-        Fp, verts = submesh(F, tri_patch == p)
-        row = table.get(int(p), {})
-        pieces.append({"UV": P[verts], "F": Fp, "label": f"Patch {int(p)}", "EL": row.get("EL"),
-                       "EA": row.get("EA")})
-    return pieces
+    rows = [dict(r, island=int(p), name=f"patch {int(p)}") for p, r in (table or {}).items()]
+    return [{"UV": q["UV"], "F": q["F"], "label": q["label"], "EL": q["EL"], "EA": q["EA"]}
+            for q in export_pieces(P, F, tri_poly, poly_patch, poly_patch, rows)]
 
 
 def export_pieces(P, F, tri_poly, poly_piece, poly_patch, rows: list[dict] | None = None) -> list[dict]:

@@ -62,7 +62,7 @@ from .relax import relax_lbfgs
 from .saliency import DEFAULT_SMOOTHING_MM
 from .springs import build_springs
 from .topology import MeshTopology, check_mesh, submesh
-from .unfold import HOPELESS_EL, Unfolding, unfold_patch
+from .unfold import HOPELESS_EL, Unfolding, labelled_patches, unfold_patch
 
 __all__ = ["Dart", "Split", "SheetPieces", "sheet_pieces", "iter_sheet_pieces", "MAX_PIECES", "MAX_DARTS",
            "EA_PER_EL", "MIN_MAX_EL"]
@@ -804,20 +804,8 @@ def iter_sheet_pieces(V, F, labels, max_el: float = 0.02, *, max_pieces: int = M
     _check_max_el(max_el)
     V, F = check_mesh(V, F, "the mesh", nondegenerate=False)
     labels = np.asarray(labels, dtype=np.int64)
-    if labels.shape != (len(F),):
-        raise BolusError(f"{labels.size} patch labels for {len(F)} triangles")
     groups = _check_groups(face_groups, len(F))
-    ids = np.unique(labels[labels >= 0])
-    sizes = np.array([np.count_nonzero(labels == p) for p in ids], dtype=np.float64)
-    before = np.concatenate([[0.0], np.cumsum(sizes)]) / max(sizes.sum(), 1.0)
-    for k, p in enumerate(ids):
-        F_local, verts = submesh(F, labels == p)
-        sub = None
-        if progress is not None:
-            lo, hi, head = before[k], before[k + 1], f"patch {k + 1}/{len(ids)}"
-
-            def sub(f, text, lo=lo, hi=hi, head=head):
-                progress(float(lo + (hi - lo) * min(max(f, 0.0), 1.0)), f"{head}: {text}")
+    for k, p, count, F_local, verts, sub in labelled_patches(F, labels, progress):
         try:
             res = sheet_pieces(V[verts], F_local, max_el, max_pieces=max_pieces, sigma_mm=sigma_mm, method=method,
                                refine_rounds=refine_rounds, progress=sub,
@@ -832,4 +820,4 @@ def iter_sheet_pieces(V, F, labels, max_el: float = 0.02, *, max_pieces: int = M
             s.path = verts[s.path]
         if res.reason:
             res.reason = f"patch {p}: {res.reason}"
-        yield k, len(ids), res
+        yield k, count, res

@@ -549,16 +549,16 @@ def _finish(run: _Run, UV, flipped, cut, used, method, t0, hopeless, deficit, ex
                      hopeless, deficit, excess, reason, run.trial_el)
 
 
-def iter_unfold_patches(V, F, labels, method: str = "lbfgs", refine_rounds: int = 3, progress=None):
-    """Unfold every patch of a labelled mesh, one after the other.
+def labelled_patches(F, labels, progress=None):
+    """The patches of a labelled mesh one after the other, for the per-patch iterators
+    (`iter_unfold_patches`, `sheet_pieces.iter_sheet_pieces`).
 
-    Parameters: V (n,3) mm, F (m,3), labels (m,) patch label of every triangle (-1: none);
-    method, refine_rounds as in `unfold_patch`; progress(fraction, text): the overall
-    fraction in [0, 1], each patch weighted by its triangle count, text "patch k/n: <step>".
-    Yields (index, count, `Unfolding`) for every label 0..p-1 present, vert_origin in the
-    caller's vertex indices.  A patch's `BolusError` is raised again naming the patch.
+    F (m,3), labels (m,) patch of every triangle (-1: none); progress(fraction, text) or None.
+    Yields (k, label, count, F_local, verts, sub) for every label present in increasing
+    order: F_local the patch's triangles in its own vertex numbering, verts (k,) their
+    vertices in F's, sub a progress callback mapping the patch's [0, 1] into its share of
+    the whole (patches weighted by triangle count, text "patch k/n: <step>") or None.
     """
-    V, F = check_mesh(V, F, "the mesh", nondegenerate=False)
     labels = np.asarray(labels, dtype=np.int64)
     if labels.shape != (len(F),):
         raise BolusError(f"{labels.size} patch labels for {len(F)} triangles")
@@ -573,9 +573,23 @@ def iter_unfold_patches(V, F, labels, method: str = "lbfgs", refine_rounds: int 
 
             def sub(f, text, lo=lo, hi=hi, head=head):
                 progress(float(lo + (hi - lo) * min(max(f, 0.0), 1.0)), f"{head}: {text}")
+        yield k, int(p), len(ids), F_local, verts, sub
+
+
+def iter_unfold_patches(V, F, labels, method: str = "lbfgs", refine_rounds: int = 3, progress=None):
+    """Unfold every patch of a labelled mesh, one after the other.
+
+    Parameters: V (n,3) mm, F (m,3), labels (m,) patch label of every triangle (-1: none);
+    method, refine_rounds as in `unfold_patch`; progress(fraction, text): the overall
+    fraction in [0, 1], each patch weighted by its triangle count, text "patch k/n: <step>".
+    Yields (index, count, `Unfolding`) for every label 0..p-1 present, vert_origin in the
+    caller's vertex indices.  A patch's `BolusError` is raised again naming the patch.
+    """
+    V, F = check_mesh(V, F, "the mesh", nondegenerate=False)
+    for k, p, count, F_local, verts, sub in labelled_patches(F, labels, progress):
         try:
             u = unfold_patch(V[verts], F_local, method=method, refine_rounds=refine_rounds, progress=sub)
         except BolusError as exc:
             raise BolusError(f"patch {p}: {exc}") from exc
         u.vert_origin = verts[u.vert_origin]  # back to the caller's vertex indices
-        yield k, len(ids), u
+        yield k, count, u
