@@ -10,7 +10,7 @@ import json
 import numpy as np
 import pytest
 from conftest import make_object
-from meshgen import icosphere, spherical_cap
+from meshgen import cylinder_piece, icosphere, spherical_cap
 
 pytestmark = pytest.mark.blender
 
@@ -150,3 +150,29 @@ def test_panel_shows_pieces_not_fit_to_cut_in_red(bpy_addon, scene):
     log = draw_panel(bpy)
     assert not [t for kind, t in log if kind == "alert"]
     assert f"{row['EL'] * 100:.1f}" in [t for kind, t in log if kind == "label"]  # the row is still there
+
+
+def test_panel_shows_the_sheet_table_and_the_export_buttons(bpy_addon, scene):
+    """With a sheet thickness the piece table has the radius, the strain and the advice; a piece
+    to print is red; the three export buttons carry the page, the ID and their format."""
+    bpy = bpy_addon
+    V, F = cylinder_piece(radius=20.0, angle=np.pi, length=80.0, na=32, nl=6)
+    ob = make_object(bpy, V, F, scale_length=0.001)
+    assert bpy.ops.bolus.segment(patches=1) == {"FINISHED"}
+    s = scene.bolus
+    s.sheet_thickness_mm, s.label, s.page = 10.0, "PT 7", "A4"
+    try:
+        log = draw_panel(bpy)
+        assert ("prop", "max_el_pct") in log and ("prop", "sheet_thickness_mm") in log and ("prop", "page") in log
+        assert bpy.ops.bolus.unfold(max_el=2.0, sheet_thickness_mm=10.0) == {"FINISHED"}
+        log = draw_panel(bpy)
+    finally:
+        for name in ("sheet_thickness_mm", "label", "page"):
+            s.property_unset(name)
+    row = json.loads(bpy.data.objects[ob.name + "_pattern"]["bolus_pattern_table"])["islands"][0]
+    labels = [t for kind, t in log if kind == "label"]
+    red = [t for kind, t in log if kind == "alert"]
+    assert "R mm" in labels and "Strain %" in labels and "Use" in labels
+    assert f"{row['R_min_mm']:.0f}" in red and "print" in red, red
+    assert any(t.startswith("1 of 1 pieces not fit to cut from a sheet") for t in red)
+    assert [t for kind, t in log if kind == "operator"].count("bolus.export_pattern") == 3
