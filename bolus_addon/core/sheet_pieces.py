@@ -557,9 +557,9 @@ class _Run:
         """The one full unfolding of a piece (vert_origin into V); its progress mapped into [lo, hi].
 
         Also a piece the refinement gave up on (stuck) gets the whole pipeline with its overlap
-        correction: the pattern must stay overlap-free (issue 12 point 1) even where it misses
-        max_el (a trial pattern handed back by ``target_el`` kept 754 overlapping triangles on a
-        43k-triangle face in one patch); the early decision before refining is what saves the time."""
+        correction, the best chance of an overlap-free pattern (issue 12 point 1) where it misses
+        max_el; the early decision before refining is what saves the time.  (A 43k-triangle face
+        in one patch still ends with one stuck piece of 754 overlapping triangles, warned.)"""
         if p.full is None:
             u = unfold_patch(p.mesh.Vc, p.mesh.Fc, method=self.method, refine_rounds=self.refine_rounds,
                              progress=self.pr.sub(lo, hi, head))
