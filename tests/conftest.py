@@ -32,6 +32,18 @@ def shared_mesh(name: str) -> Path:
     return p
 
 
+def import_bench(*names):
+    """bench/<name>.py modules imported (bench scripts import bpy only inside their functions);
+    one module for one name, a tuple for several."""
+    bench = str(ROOT / "bench")
+    sys.path.insert(0, bench)
+    try:
+        mods = tuple(importlib.import_module(n) for n in names)
+    finally:
+        sys.path.remove(bench)
+    return mods[0] if len(names) == 1 else mods
+
+
 def load_extension_package():
     """Import the repository root as the extension package 'bolus' (as Blender does)."""
     if "bolus" in sys.modules:

@@ -9,25 +9,19 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import sys
-from pathlib import Path
 
 import meshgen
 import numpy as np
 import pytest
+from conftest import import_bench
 
-BENCH = Path(__file__).resolve().parents[1] / "bench"
 T = 10.0
 
 
 @pytest.fixture(scope="module")
 def sb():
     """bench/shell_bench.py imported (bpy is imported only inside its functions)."""
-    sys.path.insert(0, str(BENCH))
-    try:
-        return importlib.import_module("shell_bench")
-    finally:
-        sys.path.remove(str(BENCH))
+    return import_bench("shell_bench")
 
 
 @pytest.fixture(scope="module")

@@ -5,24 +5,17 @@ minimiser, the ablation's stages must each add one step, the tables must keep th
 """
 from __future__ import annotations
 
-import importlib
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import import_bench
 
-BENCH = Path(__file__).resolve().parents[1] / "bench"
 
 
 @pytest.fixture(scope="module")
 def bench():
     """(benchutil, unfold_bench) imported from bench/ (bpy is imported only inside their functions)."""
-    sys.path.insert(0, str(BENCH))
-    try:
-        return importlib.import_module("benchutil"), importlib.import_module("unfold_bench")
-    finally:
-        sys.path.remove(str(BENCH))
+    return import_bench("benchutil", "unfold_bench")
 
 
 def el_of(V, F, UV):

@@ -7,37 +7,27 @@ section replaced (not duplicated) in the markdown file.
 """
 from __future__ import annotations
 
-import importlib
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import import_bench
 
 import meshgen
 
-BENCH = Path(__file__).resolve().parents[1] / "bench"
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 
 
 @pytest.fixture(scope="module")
 def ub():
     """bench/unfold_bench.py (bpy is imported only inside its functions)."""
-    sys.path.insert(0, str(BENCH))
-    try:
-        return importlib.import_module("unfold_bench")
-    finally:
-        sys.path.remove(str(BENCH))
+    return import_bench("unfold_bench")
 
 
 @pytest.fixture(scope="module")
 def hp():
-    sys.path.insert(0, str(BENCH))
-    try:
-        return importlib.import_module("hard_patches")
-    finally:
-        sys.path.remove(str(BENCH))
+    return import_bench("hard_patches")
 
 
 @dataclass
