@@ -91,19 +91,11 @@ def default_svg_path(active_name: str | None, blend_dir: str | None) -> str:
 
 
 def export_path(filepath: str, file_format: str) -> str:
-    """The absolute path to write: a name without one of the three extensions gets the
-    format's; BolusError when there is none or its folder is missing."""
-    if not filepath:
-        raise BolusError("choose a file to write the pattern to")
-    path = bpy.path.abspath(filepath)
-    if os.path.splitext(path)[1].lower() not in FORMATS.values():
-        if os.path.splitext(path)[1] and os.path.splitext(path)[1].lower() not in ("", "."):
-            raise BolusError(f"'{os.path.basename(path)}': the pattern is written as .svg, .dxf or .pdf; "
-                             "give the file one of these extensions")
+    """The path to write: Blender's '//' resolved and the format's extension added to a name
+    without one; `write_pattern` refuses the rest (no path, another extension, a missing folder)."""
+    path = bpy.path.abspath(filepath) if filepath else ""
+    if path and os.path.splitext(path)[1] in ("", "."):
         path += FORMATS[file_format]
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise BolusError(f"the folder '{folder}' does not exist")
     return path
 
 

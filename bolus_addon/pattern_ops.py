@@ -19,7 +19,8 @@ from mathutils import Matrix
 from . import mesh_io
 from .core.colormap import diverging_linear_rgba
 from .core.errors import BolusError
-from .core.mid_surface import check_sheet_thickness, mid_surface, piece_bending, principal_curvatures
+from .core.mid_surface import (check_sheet_thickness, check_thickness, mid_surface, piece_bending,
+                               principal_curvatures)
 from .core.pattern_mesh import (add_sheet_figures, build_pattern, collect_pieces, diagnose_pieces, patch_islands,
                                 pattern_messages, sheet_messages)
 from .core.piece_advice import DEFAULT_WARN_FRACTION
@@ -53,9 +54,7 @@ class _UnfoldJob:
                  thickness_mm: float = 0.0, progress=None):
         """progress(fraction, text): the core's progress (overall fraction, "patch k/n: step")."""
         self.max_el = check_max_el(max_el_pct)
-        if not np.isfinite(thickness_mm) or thickness_mm < 0:
-            raise BolusError(f"the sheet thickness must be 0 (unfold the skin) or a length in mm, got {thickness_mm:g}")
-        self.thickness = float(thickness_mm)
+        self.thickness = check_thickness(thickness_mm)
         self.region = region = mesh_io.read_region(context)
         self.warnings = list(region.warnings)
         self.infos: list[str] = []

@@ -88,6 +88,7 @@ __all__ = [
     "PrincipalCurvatures",
     "mid_surface",
     "check_sheet_thickness",
+    "check_thickness",
     "region_width",
     "folded_triangles",
     "piece_bending",
@@ -156,7 +157,8 @@ class PrincipalCurvatures:
         return np.maximum(np.abs(self.k1), np.abs(self.k2))
 
 
-def _check_thickness(thickness_mm) -> float:
+def check_thickness(thickness_mm) -> float:
+    """The sheet thickness in mm as a float; BolusError unless a number >= 0."""
     try:
         t = float(thickness_mm)
     except (TypeError, ValueError):
@@ -269,7 +271,7 @@ def mid_surface(V, F, thickness_mm, *, sigma_mm: float = DEFAULT_SMOOTHING_MM,
     is not used), e.g. shared with `piece_bending`.
     `BolusError` on a negative / NaN / infinite thickness and on degenerate meshes.
     """
-    t = _check_thickness(thickness_mm)
+    t = check_thickness(thickness_mm)
     topo = MeshTopology(*check_mesh(V, F, "the region"))
     curv = _curvatures(topo, sigma_mm, curvatures)
     V, F, N = topo.V, topo.F, curv.normals
@@ -337,7 +339,7 @@ def check_sheet_thickness(V, F, thickness_mm) -> None:
     """`BolusError` when the sheet thickness is larger than the region's width
     (`region_width`, module doc) or not a number >= 0; the message gives the width in mm
     and what to choose.  V (n,3) mm, F (m,3)."""
-    t = _check_thickness(thickness_mm)
+    t = check_thickness(thickness_mm)
     width = region_width(V, F)
     if t > width:
         raise BolusError(
@@ -367,7 +369,7 @@ def piece_bending(V, F, piece, thickness_mm, EL, max_el, sigma_mm: float = DEFAU
     R_min >= `SHEET_RADIUS_FACTOR` t and EL <= max_el; thickness 0: strain 0, advice from
     EL only.  `BolusError` on bad arrays / numbers and a piece with no triangle.
     """
-    t = _check_thickness(thickness_mm)
+    t = check_thickness(thickness_mm)
     topo = MeshTopology(*check_mesh(V, F, "the region"))
     EL = np.asarray(EL, dtype=np.float64).ravel()
     if len(EL) == 0 or not np.isfinite(EL).all() or (EL < 0).any():
