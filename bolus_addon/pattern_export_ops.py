@@ -135,7 +135,7 @@ class BOLUS_OT_export_pattern(BolusOperator, bpy.types.Operator):
                              seam_allowance_mm=self.seam_allowance_mm)
         for note in notes:
             self.report({"INFO"}, note)
-        pages = info.get("pages", 1) if isinstance(info, dict) else 1
+        pages = info["pages"]
         seams = sum(1 for s in marks.seams if not s.is_join)
         self.report({"INFO"}, f"Wrote {len(pieces)} pieces ({seams} numbered seams, {len(marks.darts)} darts) to "
                               f"{path}" + (f" on {pages} pages" if pages > 1 else "")
