@@ -56,6 +56,13 @@ def uniform_laplacian(topo: MeshTopology) -> sp.csr_matrix:
     return (sp.identity(topo.n, format="csr") - sp.diags(inv) @ A).tocsr()
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b over the last axis (broadcasting), written out: np.cross is several times slower."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 def _angles_areas_batch(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inner angles (..., 3) and areas (...) of triangles with corner positions P (..., 3, 3).
 
@@ -147,21 +154,21 @@ class SurfaceObjective:
         P = X[F]  # (m,3,3)
         u = np.roll(P, -1, axis=1) - P  # corner k -> next corner
         w = np.roll(P, -2, axis=1) - P  # corner k -> previous corner
-        cr = np.cross(u, w)  # (m,3,3) all equal to 2 A n_f (cyclic)
-        crn = np.linalg.norm(cr[:, 0], axis=1)  # 2 A
-        nrm = cr[:, 0] / np.maximum(crn, 1e-300)[:, None]
+        nrm = _cross(u[:, 0], w[:, 0])  # 2 A n_f
+        crn = np.sqrt(np.einsum("mc,mc->m", nrm, nrm))  # 2 A
+        nrm /= np.maximum(crn, 1e-300)[:, None]
+        uu = np.einsum("mkc,mkc->mk", u, u)
+        ww = np.einsum("mkc,mkc->mk", w, w)
         ang = np.arctan2(crn[:, None], np.einsum("mkc,mkc->mk", u, w))
         theta = np.bincount(F.ravel(), weights=ang.ravel(), minlength=self.n)
-        gX = np.zeros_like(X)
         # term 1: sum_{V_in} s(theta - 2 pi);  d alpha_k / d x_next = -(n x u)/|u|^2, d/d x_prev = (n x w)/|w|^2
         x1 = np.where(self.interior, theta - TWO_PI, 0.0)
         r1 = np.sqrt(x1 * x1 + smooth * smooth)
         t1 = float(np.sum(np.where(self.interior, r1 - smooth, 0.0)))
         g1 = np.where(self.interior, x1 / r1, 0.0)[F]  # (m,3) weight of each corner's angle
-        nu = np.cross(nrm[:, None, :], u) / np.einsum("mkc,mkc->mk", u, u)[..., None]
-        nw = np.cross(nrm[:, None, :], w) / np.einsum("mkc,mkc->mk", w, w)[..., None]
-        d_next = -nu * g1[..., None]
-        d_prev = nw * g1[..., None]
+        nb = nrm[:, None, :]
+        d_next = -_cross(nb, u) * (g1 / uu)[..., None]
+        d_prev = _cross(nb, w) * (g1 / ww)[..., None]
         corner_grad = -(d_next + d_prev) + np.roll(d_next, 1, axis=1) + np.roll(d_prev, 2, axis=1)
         # term 4: s(A - A0) / sum A0;  dA/dx_k = 0.5 n x (x_prev - x_next)
         A = 0.5 * crn
@@ -169,10 +176,10 @@ class SurfaceObjective:
         r4 = np.sqrt(x4 * x4 + smooth * smooth)
         t4 = float(np.sum(r4 - smooth) / self.sum_A0)
         g4 = (x4 / r4) / self.sum_A0
-        dA = 0.5 * np.cross(nrm[:, None, :], w - u) * g4[:, None, None]
+        dA = _cross(nb, w - u) * (0.5 * g4)[:, None, None]
         corner_grad = mu[0] * corner_grad + mu[3] * dA
-        for k in range(3):
-            np.add.at(gX, F[:, k], corner_grad[:, k])
+        gX = np.stack([np.bincount(F.ravel(), weights=corner_grad[..., c].ravel(), minlength=self.n)
+                       for c in range(3)], axis=1)
         # term 2: sum_{V_in} ||L x||^2 -> 2 L_in^T L_in X
         LX = self._Lin @ X
         t2 = float(np.sum(LX * LX))
