@@ -35,6 +35,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from scipy.optimize import minimize
+from threadpoolctl import threadpool_limits
 
 from .errors import BolusError
 from .improve_objective import MU_DEFAULT, SurfaceObjective, uniform_laplacian
@@ -174,8 +175,11 @@ def gradient_steps(obj: SurfaceObjective, upper, *, max_iterations: int = GRADIE
     total = 0
     last = best.value
     while total < max_iterations:
-        res = minimize(fun, x, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)),
-                       options={"maxiter": min(chunk, max_iterations - total), "maxcor": 20})
+        # one BLAS thread: L-BFGS-B's many tiny BLAS calls ran 3-5x slower with OpenBLAS threads on a
+        # busy 2-core machine (setulb 3 ms per call for 256 variables, measured)
+        with threadpool_limits(1, user_api="blas"):
+            res = minimize(fun, x, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)),
+                           options={"maxiter": min(chunk, max_iterations - total), "maxcor": 20})
         total += max(int(res.nit), 1)
         x = np.clip(res.x, lo, hi)
         d[ids] = x
