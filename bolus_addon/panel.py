@@ -5,6 +5,7 @@ import bpy
 
 from . import mesh_io
 from .cut_ops import PROP_CUT_TABLE
+from .improve_ops import IMPROVED_SUFFIX, PROP_IMPROVE_TABLE
 from .operators import PROP_FLV, PROP_PATCH_TABLE, PROP_SUM_VARPI
 from .pattern_ops import PATTERN_SUFFIX, PROP_PATTERN_TABLE
 from .print_ops import PROP_ORIENT_TABLE, PROP_PART_SOURCE, PROP_PRINT_TABLE
@@ -101,6 +102,43 @@ def draw_patches(box, s, obj):
             (f"{r['a']}|{r['b']}", r["method"], f"{r['turning_before']:.2f}→{r['turning_after']:.2f}",
              f"{r['max_shift_mm']:.1f} mm") for r in cuts))
 
+def improved_of(obj):
+    """The improved surface to show figures of: obj itself or its ``<name>_improved``."""
+    if obj is None:
+        return None
+    if PROP_IMPROVE_TABLE in obj:
+        return obj
+    return bpy.data.objects.get(obj.name + IMPROVED_SUFFIX)
+
+
+def _improve_row(name: str, st: dict) -> tuple:
+    return (name, f"{st['flv']:.3g}", f"{st['sum_varpi']:.2f}", f"{st['max_varpi']:.3f}", f"{st['smoothness']:.1f}",
+            f"{st['area_mm2']:.0f}", f"{st['max_gap_mm']:.2f}")
+
+
+def draw_improve(box, s, obj):
+    """The optional step between the patches and the pattern, and its Table 4-4 after a run."""
+    box.label(text="Improve flattenability (optional)", icon="MOD_SMOOTH")
+    row = box.row(align=True)
+    row.prop(s, "max_gap_mm", text="Max gap (mm)")
+    row.prop(s, "improve_method", text="")
+    box.prop(s, "seed")
+    op = box.operator("bolus.improve_flattenability", icon="MOD_SMOOTH")
+    op.max_gap_mm, op.method, op.seed = s.max_gap_mm, s.improve_method, s.seed
+    imp = improved_of(obj)
+    t = mesh_io.json_prop(imp, PROP_IMPROVE_TABLE)
+    if not isinstance(t, dict) or "whole" not in t:
+        return
+    w = t["whole"]
+    box.label(text=f"{imp.name}: {t.get('status', '')}, FLV {w['before']['flv']:.3g} → {w['after']['flv']:.3g}, "
+                   f"gap ≤ {w['after']['max_gap_mm']:.2f} mm")
+    rows = [_improve_row("all", w["before"]), _improve_row("→", w["after"])]
+    if t.get("per_patch"):
+        for p in t.get("patches", []):
+            rows += [_improve_row(f"P{p['patch']}", p["before"]), _improve_row("→", p["after"])]
+    draw_table(box, ("", "FLV", "Σϖ", "max ϖ", "Smooth", "mm²", "Gap"), rows)
+
+
 def draw_pattern(box, s, obj):
     box.label(text="3. Sheet pattern", icon="UV")
     row = box.row(align=True)
@@ -168,6 +206,15 @@ def draw_bolus(box, s, obj):
     box.prop(s, "connector_clearance_mm", text="Connector clearance (mm)")
 
 
+def print_source(obj):
+    """The object whose print tables to show: obj, or the source a print part names (a bolus and an
+    improved surface name their skin in 'bolus_source' too, but their parts are their own)."""
+    if (obj is not None and PROP_PART_SOURCE in obj and not is_bolus_object(obj)
+            and PROP_IMPROVE_TABLE not in obj):
+        return bpy.data.objects.get(obj[PROP_PART_SOURCE], obj)
+    return obj
+
+
 def draw_print(box, s, obj):
     box.label(text="5. 3D print", icon="MOD_BUILD")
     row = box.row(align=True)
@@ -175,9 +222,7 @@ def draw_print(box, s, obj):
     row.prop(s, "print_method", text="")
     op = box.operator("bolus.print_segment", icon="MOD_EXPLODE")
     op.parts, op.method, op.seed = s.parts, s.print_method, s.seed
-    src = obj
-    if obj is not None and PROP_PART_SOURCE in obj and not is_bolus_object(obj):  # a bolus names its skin
-        src = bpy.data.objects.get(obj[PROP_PART_SOURCE], obj)
+    src = print_source(obj)
     t = mesh_io.json_prop(src, PROP_PRINT_TABLE)
     if t and "parts" in t:
         box.label(text=f"{len(t['parts'])} parts, largest/smallest area {t['area_balance']:.2f}")
@@ -210,6 +255,7 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
         layout.label(text=f"1 unit = {mesh_io.mm_per_unit(context.scene):g} mm", icon="DRIVER_DISTANCE")
         draw_saliency(layout.box(), s, obj)
         draw_patches(layout.box(), s, obj)
+        draw_improve(layout.box(), s, obj)
         draw_pattern(layout.box(), s, obj)
         draw_bolus(layout.box(), s, obj)
         draw_print(layout.box(), s, obj)

@@ -218,11 +218,13 @@ class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def run(self, context):
-        from . import solid_print_ops  # noqa: PLC0415 (it imports this module)
+        from . import improve_ops, solid_print_ops  # noqa: PLC0415 (they import this module)
 
         obj = mesh_io.active_mesh_object(context)
-        # a bolus's own 'bolus_source' names the skin it was made on: its parts are its own
-        source = obj.name if solid_print_ops.is_bolus_object(obj) else obj.get(PROP_PART_SOURCE, obj.name)
+        # the 'bolus_source' of a bolus or an improved surface names the skin it was made from: its parts
+        # are its own; a print part's names the object it is a part of
+        own = solid_print_ops.is_bolus_object(obj) or improve_ops.is_improved_object(obj)
+        source = obj.name if own else obj.get(PROP_PART_SOURCE, obj.name)
         parts = part_objects(source)
         if not parts:
             raise BolusError(f"'{source}' has no print parts yet: run Orient Print Parts first")

@@ -109,6 +109,28 @@ def sheet_thickness_property(**kw):
     )
 
 
+IMPROVE_METHODS = [
+    ("GRADIENT", "Gradient", "Projected L-BFGS-B on the offsets, on the smoothed objective of eq. 4-21 (fast)"),
+    ("LPSO", "L-PSO", "The seed's local particle swarm (Algorithms 4-1, 4-2) on the objective of eq. 4-21 (seeded)"),
+]
+
+
+def max_gap_property(**kw):
+    return FloatProperty(
+        name="Max air gap",
+        description=(
+            "Largest distance in mm a vertex may move outward along its normal, i.e. the largest air gap "
+            "between the skin and a bolus shaped to the improved surface (about 1 mm is clinically acceptable)"
+        ),
+        # no hard minimum: 0 or a negative value from a script is refused with a message, not clamped
+        default=1.0, soft_min=0.1, soft_max=5.0, precision=2, **kw,
+    )
+
+
+def improve_method_property(**kw):
+    return EnumProperty(name="Optimiser", items=IMPROVE_METHODS, default="GRADIENT", **kw)
+
+
 PAGE_ITEMS = [
     ("NONE", "One page", "PDF: one page the size of the whole pattern (for a plotter or a large-format printer)"),
     ("A4", "A4 tiles", "PDF: tiled on A4 pages with overlap and alignment marks"),
@@ -230,6 +252,8 @@ class BolusSettings(bpy.types.PropertyGroup):
     eta: eta_property()
     seed: seed_property()
     method: method_property()
+    max_gap_mm: max_gap_property()
+    improve_method: improve_method_property()
     unfold_method: unfold_method_property()
     refine: refine_property()
     gap_mm: gap_property()

@@ -176,3 +176,34 @@ def test_panel_shows_the_sheet_table_and_the_export_buttons(bpy_addon, scene):
     assert f"{row['R_min_mm']:.0f}" in red and "print" in red, red
     assert any(t.startswith("1 of 1 pieces not fit to cut from a sheet") for t in red)
     assert [t for kind, t in log if kind == "operator"].count("bolus.export_pattern") == 3
+
+
+def test_panel_improve_section_and_its_table(bpy_addon, scene):
+    """The optional step between the patches and the sheet pattern: max gap, optimiser, seed, the
+    button (carrying the scene's settings), and after a run the Table 4-4 rows, whole and per patch."""
+    bpy = bpy_addon
+    V, F = spherical_cap(40.0, 50.0, 3)
+    V = V + np.random.default_rng(1).uniform(-0.3, 0.3, V.shape)  # scan-like noise to remove
+    ob = make_object(bpy, V, F, scale_length=0.001)
+    log = draw_panel(bpy)
+    i = log.index(("label", "Improve flattenability (optional)"))
+    assert log.index(("operator", "bolus.segment")) < i < log.index(("operator", "bolus.unfold"))
+    assert ("prop", "max_gap_mm") in log and ("prop", "improve_method") in log
+    assert ("operator", "bolus.improve_flattenability") in log
+    assert bpy.ops.bolus.segment(patches=2) == {"FINISHED"}
+    s = scene.bolus
+    s.max_gap_mm, s.smoothing_mm = 0.5, 0.0
+    try:
+        assert bpy.ops.bolus.improve_flattenability(max_gap_mm=s.max_gap_mm, method=s.improve_method,
+                                                    seed=s.seed) == {"FINISHED"}
+    finally:
+        s.property_unset("max_gap_mm")
+        s.property_unset("smoothing_mm")
+    imp = bpy.data.objects[ob.name + "_improved"]
+    t = json.loads(imp["bolus_improve_table"])
+    for active in (ob, imp):  # the source or the improved object selected: the same table
+        bpy.context.view_layer.objects.active = active
+        labels = [x for kind, x in draw_panel(bpy) if kind == "label"]
+        assert any(x.startswith(f"{imp.name}: {t['status']}, FLV") for x in labels), labels
+        assert "all" in labels and "P0" in labels and "P1" in labels and labels.count("→") == 3
+        assert f"{t['whole']['after']['flv']:.3g}" in labels and f"{t['patches'][1]['after']['max_gap_mm']:.2f}" in labels
