@@ -77,8 +77,16 @@ class _ImproveRun:
             raise BolusError(f"an object named '{name}' exists and was not made by Improve Flattenability: "
                              "rename or delete it first")
         poly_labels = mesh_io.read_face_labels(src, ATTR_PATCH)  # safe in Edit Mode
-        self.patched = poly_labels is not None
         labels = None if poly_labels is None else poly_labels[self.region.tri_poly]
+        self.infos: list[str] = []
+        if labels is not None and not (labels >= 0).any():
+            labels = None
+            self.infos.append(f"no face of the region is in a segmented patch ({ATTR_PATCH} = -1): "
+                              "improved as one patch")
+        elif labels is not None and (labels < 0).any():
+            out = len(np.unique(self.region.tri_poly[labels < 0]))
+            self.infos.append(f"{out} faces outside the segmented patches ({ATTR_PATCH} = -1) were left as they are")
+        self.patched = labels is not None
         self.job = ImproveJob(self.region.V, _world_winding(src, self.region.F), self.max_gap_mm, method=method,
                               rng=self.seed, smoothing_mm=self.smoothing_mm, patch_labels=labels,
                               progress=op.progress, vert_ids=self.region.vert_ids)
@@ -236,6 +244,8 @@ class BOLUS_OT_improve_flattenability(BolusOperator, bpy.types.Operator):
     def finish(self, context, run: _ImproveRun, res):
         obj = build_improved_object(context, run, res)
         self.warn_all(run.warnings)
+        for msg in run.infos:
+            self.report({"INFO"}, msg)
         for level, msg in improve_reports(run, res, obj.name):
             self.report({level}, msg)
         return {"FINISHED"}

@@ -72,6 +72,7 @@ def lines(out: str, kind: str) -> list[str]:
 
 
 # =========================================================================== the object
+@pytest.mark.smoke
 @pytest.mark.parametrize("scale_length, transformed", [(0.001, False), (0.01, True)], ids=["mm", "cm_transformed"])
 def test_improved_copy_is_the_cores_surface(bpy_addon, raw, capfd, scale_length, transformed):
     """A copy with the source's polygons, attributes and transform; only interior vertices moved,
@@ -218,6 +219,33 @@ def test_patches_are_improved_separately_and_their_borders_stay(bpy_addon, raw, 
     for p in t["patches"]:
         assert p["after"]["flv"] >= p["before"]["flv"]
         assert any(ln.startswith(f"patch {p['patch']} (") and "largest varpi" in ln for ln in info), out
+
+
+def test_faces_outside_the_patches_stay(bpy_addon, raw, capfd):
+    """Faces a segmentation of an Edit Mode region left at bolus_patch = -1 are not touched (said
+    once); a region with no patch at all is improved as one patch."""
+    bpy = bpy_addon
+    V, F = bumpy(n=10)
+    ob = make_object(bpy, V, F, scale_length=0.001)
+    C = V[F].mean(axis=1)
+    labels = np.where(C[:, 0] < -10.0, -1, 0).astype(np.int32)
+    attr = ob.data.attributes.new("bolus_patch", "INT", "FACE")
+    attr.data.foreach_set("value", labels)
+    capfd.readouterr()
+    assert bpy.ops.bolus.improve_flattenability(max_gap_mm=GAP) == {"FINISHED"}
+    info = lines(capfd.readouterr().out, "Info")
+    assert f"{(labels < 0).sum()} faces outside the segmented patches (bolus_patch = -1) were left as they are" in info
+    gap = attr_array(bpy.data.objects["skin_improved"].data, "bolus_air_gap")
+    outside = np.zeros(len(V), dtype=bool)
+    outside[F[labels < 0].ravel()] = True
+    assert np.all(gap[outside] == 0.0) and gap.max() > 0.05
+    attr.data.foreach_set("value", np.full(len(F), -1, dtype=np.int32))
+    assert bpy.ops.bolus.improve_flattenability(max_gap_mm=GAP) == {"FINISHED"}
+    info = lines(capfd.readouterr().out, "Info")
+    assert "no face of the region is in a segmented patch (bolus_patch = -1): improved as one patch" in info
+    imp = bpy.data.objects["skin_improved"]
+    assert attr_array(imp.data, "bolus_air_gap").max() > 0.05
+    assert not json.loads(imp["bolus_improve_table"])["per_patch"]
 
 
 def test_flat_plane_is_left_as_it_is(bpy_addon, raw, capfd):
