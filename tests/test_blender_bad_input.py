@@ -309,7 +309,7 @@ def test_error_in_edit_mode_stays_in_edit_mode(bpy_addon, scene):
 
 # ------------------------------------------- every operator that reads a region (issue 9)
 REGION_OPS = {"saliency_preview": {"smoothing_mm": 0.0}, "segment": {"patches": 2}, "smooth_cuts": {}, "unfold": {},
-              "print_segment": {"parts": 2}, "orient_parts": {}}
+              "print_segment": {"parts": 2}, "orient_parts": {}, "improve_flattenability": {}}
 
 
 def set_co(ob, co) -> None:
