@@ -215,6 +215,7 @@ def test_eps_rule_stops_early_and_zero_eps_runs_longer():
     ("particles", "particles"),
     ("iterations", "iterations"),
     ("chunk", "chunk"),
+    ("max_iterations", "max_iterations"),
     ("eps", "eps"),
     ("top_fraction", "top_fraction"),
 ])
@@ -229,7 +230,7 @@ def test_bad_arguments_are_refused(bad, says):
     elif bad == "upper_negative":
         upper = np.full(obj.n, -1.0)
     else:
-        kw = {"particles": 1, "iterations": 0, "chunk": 2.5, "eps": np.inf, "top_fraction": 0.0}
+        kw = {"particles": 1, "iterations": 0, "chunk": 2.5, "max_iterations": np.inf, "eps": np.inf, "top_fraction": 0.0}
         kw = {bad: kw[bad]}
     with pytest.raises(BolusError, match=says):
         lpso(obj, d0, upper, **kw)

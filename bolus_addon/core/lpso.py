@@ -47,6 +47,9 @@ INIT_SPREAD = 0.25
 #: initial velocities are uniform in +- VELOCITY0 * box width
 VELOCITY0 = 0.05
 
+#: velocities are clamped to +- VMAX * box width
+VMAX = 1.0
+
 #: the swarm has collapsed when every particle is within this * box width of gbest
 #: and no velocity is larger: more iterations cannot find anything new
 STALL = 1e-9
@@ -188,8 +191,16 @@ def lpso_steps(obj, d0, upper, *, rng=0, particles: int = 30, iterations: int = 
         raise BolusError(f"upper must be >= 0 (the largest offset, mm), got {upper[i]} at vertex {i}")
     for name, v, lo in (("particles", particles, 2), ("iterations", iterations, 1),
                         ("max_iterations", max_iterations, 1), ("chunk", chunk, 1)):
-        if int(v) != v or v < lo:
-            raise BolusError(f"{name} must be an integer >= {lo}, got {v}")
+        try:
+            ok = int(v) == v and v >= lo
+        except (TypeError, ValueError, OverflowError):
+            ok = False
+        if not ok:
+            raise BolusError(f"{name} must be an integer >= {lo}, got {v!r}")
+    try:
+        eps = float(eps)
+    except (TypeError, ValueError):
+        eps = np.nan
     if not (np.isfinite(eps) and eps >= 0):
         raise BolusError(f"eps must be a finite number >= 0, got {eps}")
     if not (0.0 < float(top_fraction) <= 1.0):
@@ -225,6 +236,7 @@ def lpso_steps(obj, d0, upper, *, rng=0, particles: int = 30, iterations: int = 
             break
         k = len(nodes)
         hi = upper[nodes]                                  # (k,) box widths (lower bound 0)
+        vmax = VMAX * hi
         x0 = d[nodes]
         X = np.clip(x0 + g.uniform(-INIT_SPREAD, INIT_SPREAD, (P, k)) * hi, 0.0, hi)
         X[0] = x0
@@ -241,7 +253,7 @@ def lpso_steps(obj, d0, upper, *, rng=0, particles: int = 30, iterations: int = 
             r2 = g.random((P, k))
             Vel *= PSO_W
             Vel += PSO_C1 * r1 * (pbest - X) + PSO_C2 * r2 * (gX - X)   # line 9
-            np.clip(Vel, -hi, hi, out=Vel)
+            np.clip(Vel, -vmax, vmax, out=Vel)
             X += Vel                                                     # line 10
             np.clip(X, 0.0, hi, out=X)
             f = np.asarray(obj.batch_values(d, nodes, X), dtype=float)
