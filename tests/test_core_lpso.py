@@ -26,11 +26,12 @@ def cone(h=8.0):
     return V, F, int(ids[ring == -1][0]), ids[ring == 2], ids[ring == 3], ids[ring == 1]
 
 
-def bumpy(nx=14, seed=3):
-    """A wavy 100 mm square with bumps and dents of ~1.5 mm (225 vertices, 169 interior)."""
+def bumpy(nx=14, seed=3, amp=4.0):
+    """A free-form 100 mm square with 8 bumps and dents up to ``amp`` mm high, about 8 mm wide
+    (nx = 14: 225 vertices, 169 interior, sum varpi 0.87; the seed's free-form example has 0.61)."""
     g = np.random.default_rng(seed)
     c = g.uniform(-40, 40, (8, 2))
-    a = g.uniform(-1.5, 1.5, 8)
+    a = g.uniform(-amp, amp, 8)
 
     def z(x, y):
         return sum(ai * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / 120.0) for ai, (cx, cy) in zip(a, c))
@@ -192,8 +193,8 @@ def test_J_drops_on_a_bumpy_surface():
     msg = (f"J {J0:.3f} -> {s.value:.3f}, sum varpi {t0[0]:.4f} -> {t1[0]:.4f}, {s.iterations} iterations, "
            f"{s.rounds} rounds, stop {s.stop}, largest gap {s.d.max():.3f} mm")
     assert s.value == pytest.approx(obj.value(s.d), rel=1e-12), msg
-    assert s.value < 0.97 * J0, msg
-    assert t1[0] < 0.95 * t0[0], msg            # the flattenability term itself drops
+    assert s.value < 0.96 * J0, msg
+    assert t1[0] < 0.93 * t0[0], msg            # the flattenability term itself drops
     assert s.rounds >= 2 and s.d.max() > 0.01, msg
     assert s.iterations <= 400 and s.evaluations >= 20 * s.iterations
 
