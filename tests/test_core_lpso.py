@@ -231,8 +231,8 @@ def test_bad_arguments_are_refused(bad, says):
     elif bad == "upper_negative":
         upper = np.full(obj.n, -1.0)
     else:
-        kw = {"particles": 1, "iterations": 0, "chunk": 2.5, "max_iterations": np.inf, "eps": np.inf, "top_fraction": 0.0}
-        kw = {bad: kw[bad]}
+        kw = {bad: {"particles": 1, "iterations": 0, "chunk": 2.5, "max_iterations": np.inf, "eps": np.inf,
+                    "top_fraction": 0.0}[bad]}
     with pytest.raises(BolusError, match=says):
         lpso(obj, d0, upper, **kw)
 
