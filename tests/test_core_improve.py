@@ -236,3 +236,16 @@ def test_surface_stats_row():
     assert (st.vertices, st.edges, st.faces) == (topo.n, len(topo.edges), topo.m)
     assert st.sum_varpi == pytest.approx(analyse(V, F, 0.0).sum_varpi) == pytest.approx(st.raw_sum_varpi)
     assert st.area_mm2 == pytest.approx(topo.areas.sum()) and st.max_gap_mm == 0.0
+
+
+def test_lpso_method_through_the_job_is_seeded_and_bounded():
+    V, F = bumpy(n=10, noise=0.4)
+    kw = dict(method="LPSO", rng=3, particles=10, iterations=20, max_iterations=200, smoothing_mm=0.0)
+    a = improve_flattenability(V, F, 0.7, **kw)
+    b = improve_flattenability(V, F, 0.7, **kw)
+    assert np.array_equal(a.gap, b.gap) and a.method == "LPSO"
+    assert a.changed and np.all(a.gap >= 0) and a.gap.max() <= 0.7
+    assert np.all(a.gap[MeshTopology(V, F).boundary_vertices] == 0)
+    assert a.whole_after.sum_varpi <= a.whole_before.sum_varpi
+    c = improve_flattenability(V, F, 0.7, **{**kw, "rng": 4})
+    assert not np.array_equal(a.gap, c.gap)

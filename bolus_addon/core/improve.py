@@ -299,8 +299,11 @@ class ImproveJob:
         else:
             from .lpso import lpso_steps
             seed = int(self.rng.integers(2**63 - 1))
+            # a snapshot about every 0.2 s (a swarm iteration costs ~ particles x triangles); the
+            # snapshots do not change the swarm, so the result does not depend on this
+            chunk = int(np.clip(500_000 // (self.particles * obj.m), 1, 50))
             self._it = lpso_steps(obj, np.zeros(obj.n), upper, rng=seed, particles=self.particles,
-                                  iterations=self.iterations, max_iterations=self.max_iterations)
+                                  iterations=self.iterations, max_iterations=self.max_iterations, chunk=chunk)
         self._state = None
 
     def _end_patch(self, k: int, cancelled: bool = False) -> None:
