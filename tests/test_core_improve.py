@@ -249,3 +249,16 @@ def test_lpso_method_through_the_job_is_seeded_and_bounded():
     assert a.whole_after.sum_varpi <= a.whole_before.sum_varpi
     c = improve_flattenability(V, F, 0.7, **{**kw, "rng": 4})
     assert not np.array_equal(a.gap, c.gap)
+
+
+def test_whole_region_crease_note_when_only_the_whole_gets_worse():
+    V, F = bumpy(n=16)
+    labels = (MeshTopology(V, F).centroids[:, 0] > 0).astype(int)
+    res = improve_flattenability(V, F, 1.0, patch_labels=labels)
+    note = [m for _, m in improve_messages(res) if "become shallow creases" in m]
+    worse = res.whole_after.sum_varpi > res.whole_before.sum_varpi
+    assert bool(note) == worse
+    res.whole_after.sum_varpi = res.whole_before.sum_varpi + 1.0  # the case the note is for
+    assert any("become shallow creases" in m for _, m in improve_messages(res))
+    res.whole_after.sum_varpi = res.whole_before.sum_varpi - 1.0
+    assert not any("become shallow creases" in m for _, m in improve_messages(res))

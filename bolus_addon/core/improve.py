@@ -465,6 +465,10 @@ def improve_messages(res: Improvement, name: str = "the region") -> list[tuple[s
     if res.cancelled:
         out.append(("WARNING", f"cancelled after {sum(r.iterations for r in res.patches)} iterations: the best "
                                "surface so far was kept"))
+    if len(res.patches) > 1 and res.changed and a.sum_varpi > b.sum_varpi:
+        out.append(("INFO", f"{name} as a whole: sum varpi {b.sum_varpi:.3f} -> {a.sum_varpi:.3f} rad although no patch "
+                            "got worse: the patch borders stay fixed and become shallow creases (at most the air gap "
+                            "deep); a sheet is cut along them, so for the pattern only the patches' figures count"))
     if not res.changed:
         out.append(("INFO", f"{name}: no improvement found within {res.max_gap_mm:g} mm (sum varpi "
                             f"{b.sum_varpi:.3f} rad); the surface is unchanged"))
