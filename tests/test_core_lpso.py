@@ -197,6 +197,8 @@ def test_J_drops_on_a_bumpy_surface():
     assert t1[0] < 0.93 * t0[0], msg            # the flattenability term itself drops
     assert s.rounds >= 2 and s.d.max() > 0.01, msg
     assert s.iterations <= 400 and s.evaluations >= 20 * s.iterations
+    # the selection is refreshed between rounds: a vertex outside the first round's nodes moved too
+    assert not np.isin(np.nonzero(s.d > 0)[0], select_nodes(obj, d0)).all(), msg
 
 
 def test_eps_rule_stops_early_and_zero_eps_runs_longer():
