@@ -18,6 +18,10 @@ operators as a modeler does:
                               patch above --max-el % (2) gets darts and splits; every piece gets
                               its bending strain and the sheet-or-print advice; pieces not fit to
                               cut are warned with their figures
+   bolus.improve_flattenability (optional step) -> the object face_improved: the area moved
+                              outward by at most --max-gap mm (1) where that makes it flatter,
+                              out/air_gap.png (its air-gap map), and the pattern unfolded again
+                              from it: EL / EA before and after in report.txt
 5. bolus.export_pattern    -> out/pattern.svg, out/pattern.dxf (mm, for a cutter) and
                               out/pattern_a4.pdf (tiled on A4): true scale, pieces labelled with
                               --label, numbered matching marks, dart marks, a 50 mm test square
@@ -60,6 +64,8 @@ def parse_args():
     ap.add_argument("--max-el", type=float, default=2.0, help="unfold's EL target in %% (darts and splits); 0 = off")
     ap.add_argument("--sheet-thickness", type=float, default=5.0,
                     help="sheet thickness in mm: the pattern of the mid-surface, bending advice; 0 = the skin")
+    ap.add_argument("--max-gap", type=float, default=1.0,
+                    help="improve_flattenability's largest air gap in mm; 0 = skip that step")
     ap.add_argument("--thickness", type=float, default=10.0, help="bolus thickness in mm")
     ap.add_argument("--shell-resolution", type=float, default=0.5, help="make_shell's resolution in mm")
     ap.add_argument("--label", default="DEMO", help="engraved on each part with its number")
@@ -247,6 +253,53 @@ def render_section(face: bpy.types.Object, bolus: bpy.types.Object, path: Path, 
                        size_px=size_px)
 
 
+def improve_and_unfold(obj: bpy.types.Object, args, out: Path) -> dict:
+    """The optional step: Improve Flattenability on the patches (outward only, at most --max-gap mm),
+    the air-gap map rendered, and the improved surface unfolded with the same settings as the skin."""
+    from bolus_addon.mesh_io import read_face_labels
+
+    bpy.context.view_layer.objects.active = obj
+    obj.data.polygons.foreach_set("select", read_face_labels(obj.data, "bolus_patch") >= 0)
+    bpy.ops.object.mode_set(mode="EDIT")
+    seconds = run_op(bpy.ops.bolus.improve_flattenability, max_gap_mm=args.max_gap, method="GRADIENT", seed=0)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    improved = bpy.data.objects[obj.name + "_improved"]
+    table = json.loads(improved["bolus_improve_table"])
+    obj.hide_render = True
+    render_closeup(improved, "bolus_air_gap_color", out / "air_gap.png")
+    obj.hide_render = False
+    for ob in bpy.context.view_layer.objects:
+        ob.select_set(ob is improved)
+    bpy.context.view_layer.objects.active = improved
+    t_unf = run_op(bpy.ops.bolus.unfold, max_el=args.max_el, sheet_thickness_mm=args.sheet_thickness)
+    pattern = bpy.data.objects[improved.name + "_pattern"]
+    improved.hide_render = pattern.hide_render = True  # the later pictures show the skin's bolus and parts
+    bpy.context.view_layer.objects.active = obj
+    return {"table": table, "pattern": json.loads(pattern["bolus_pattern_table"]), "seconds": seconds,
+            "unfold_seconds": t_unf}
+
+
+def improve_lines(improve: dict, pattern_table: dict) -> list[str]:
+    """report.txt's lines of the optional step: Table 4-4 before -> after, and the pattern's EL / EA."""
+    t = improve["table"]
+    b, a = t["whole"]["before"], t["whole"]["after"]
+    lines = [f"Improve flattenability (max gap {t['max_gap_mm']:g} mm, {t['method']}, {improve['seconds']:.1f} s; "
+             f"Table 4-4, at smoothing {t['smoothing_mm']:g} mm): FLV {b['flv']:.4g} -> {a['flv']:.4g}, sum varpi "
+             f"{b['sum_varpi']:.3f} -> {a['sum_varpi']:.3f} rad (raw {b['raw_sum_varpi']:.2f} -> "
+             f"{a['raw_sum_varpi']:.2f}), area {b['area_mm2']:.0f} -> {a['area_mm2']:.0f} mm2, air gap max "
+             f"{a['max_gap_mm']:.2f} / mean {a['mean_gap_mm']:.2f} mm (air_gap.png)"]
+    for r in t["patches"]:
+        lines.append(f"  patch {r['patch']}: {r['status']}, sum varpi {r['before']['sum_varpi']:.3f} -> "
+                     f"{r['after']['sum_varpi']:.3f}, largest varpi {r['before']['max_varpi']:.3f} -> "
+                     f"{r['after']['max_varpi']:.3f}, largest gap {r['after']['max_gap_mm']:.2f} mm")
+    p = improve["pattern"]
+    lines.append(f"Pattern of the improved surface: EL {pattern_table['EL'] * 100:.2f} -> {p['EL'] * 100:.2f} %, "
+                 f"EA {pattern_table['EA'] * 100:.2f} -> {p['EA'] * 100:.2f} %, {pattern_table['pieces']} -> "
+                 f"{p['pieces']} pieces, {pattern_table['darts']} -> {p['darts']} darts (the skin's pattern is the "
+                 "one exported)")
+    return lines
+
+
 def run_op(op, **kw) -> float:
     t = time.perf_counter()
     result = op(**kw)
@@ -284,6 +337,7 @@ def main():
            label=args.label, page="A4")
     pattern = bpy.data.objects[obj.name + "_pattern"]
     pattern_table = json.loads(pattern["bolus_pattern_table"])
+    improve = improve_and_unfold(obj, args, out) if args.max_gap > 0 else None
 
     # 3D printing: the bolus itself, a closed solid of --thickness mm on the treatment area (after the
     # cuts), split into parts with pegs and holes, each turned to its best print direction, one STL each
@@ -323,11 +377,14 @@ def main():
         "segment": jagged_table,
         "smooth_cuts": {"borders": cuts, "patches": table["patches"]},
         "pattern": pattern_table,
+        "improve": improve,
         "bolus": {**shell, "section_png": section},
         "print": {"segment": json.loads(bolus["bolus_print_table"]), "orient": orient_table,
                   "joints": joints, "stl": sorted(p.name for p in (out / "parts").glob("*.stl"))},
         "seconds": {"saliency_preview": round(t_sal, 3), "segment": round(t_seg, 3), "smooth_cuts": round(t_cut, 3),
-                    "unfold": round(t_unf, 3), "make_shell": round(t_shell, 3), "print_segment": round(t_prs, 3), "orient_parts": round(t_ori, 3),
+                    "unfold": round(t_unf, 3),
+                    "improve_flattenability": round(improve["seconds"], 3) if improve else None,
+                    "make_shell": round(t_shell, 3), "print_segment": round(t_prs, 3), "orient_parts": round(t_ori, 3),
                     "export_parts": round(t_stl, 3),
                     "export_pattern": round(t_svg, 3)},
     }
@@ -379,6 +436,8 @@ def main():
     else:
         lines.append(f"Every piece is fit to cut (EL and EA at most {warn_pct:g} %).")
     lines += [f"  {r['name']}: {r['sheet_reason']}" for r in pattern_table["islands"] if r.get("sheet") == "print"]
+    if improve:
+        lines += improve_lines(improve, pattern_table)
     lines.append(f"Bolus '{bolus.name}': {shell['bolus_thickness_mm']:g} mm asked, wall "
                  f"{shell['bolus_thickness_min_mm']:.2f} / {shell['bolus_thickness_mean_mm']:.2f} / "
                  f"{shell['bolus_thickness_max_mm']:.2f} mm (min / mean / max, ray casts from the inner face), "
@@ -402,7 +461,7 @@ def main():
     render_pattern(pattern, out / "pattern.png")
     render_parts([obj, pattern, bolus], parts, out / "parts.png")
     bpy.ops.wm.save_as_mainfile(filepath=str((out / "demo.blend").resolve()))
-    print(f"wrote {out}/demo.blend, saliency.png, section.png, patches.png, cuts.png, cuts_before.png, cuts_after.png, pattern.png, parts.png, pattern.svg, pattern.dxf, pattern_a4.pdf, parts/*.stl, report.json, report.txt")
+    print(f"wrote {out}/demo.blend, saliency.png, section.png, patches.png, cuts.png, cuts_before.png, cuts_after.png, pattern.png, air_gap.png, parts.png, pattern.svg, pattern.dxf, pattern_a4.pdf, parts/*.stl, report.json, report.txt")
 
 
 def run_with_addon(fn) -> None:
