@@ -71,6 +71,9 @@ METHODS = ("GRADIENT", "LPSO")
 GAPS_NOSE = (1.0,)
 GAPS_CONCAVE = (1.0, 2.0, 3.0)
 GAPS_FREEFORM = (1.0, 3.6)  # 3.6 mm: the largest gap of the seed's own free-form result (Table 4-3)
+#: the seed's swarm settings for its examples (4.4: NP 100, T 10,000; 30,000 iterations on the free-form surface)
+SEED_LPSO = {"particles": 100, "iterations": 10000, "max_iterations": 30000}
+SEED_LPSO_LABEL = "LPSO NP100 T10k"
 DART_MAX_EL = 0.02
 TARGET_TIME_S = 10.0
 TARGET_EL_RATIO = 1.02
@@ -152,7 +155,8 @@ def make_cases(quick: bool = False, only=()) -> list[dict]:
         except Exception as exc:
             cases.append({"name": name, "error": f"{type(exc).__name__}: {exc}"})
             continue
-        cases.append({"name": name, "kind": "nose", "V": V, "F": F, "gaps": GAPS_NOSE, "smoothings": (ANALYSIS_MM,),
+        cases.append({"name": name, "kind": "nose", "V": V, "F": F, "gaps": GAPS_NOSE,
+                      "smoothings": (ANALYSIS_MM,) if quick else (ANALYSIS_MM, 0.0),
                       "how": f"{fname} x{scale:g}: treatment_area disk r = {r:.1f} mm around the nose tip (vertex {tip}, "
                              f"largest z), {len(V)} vertices, {len(F)} triangles, {area.holes} hole(s)"})
     if not quick:
@@ -256,17 +260,18 @@ def check_bounds(V, F, res, max_gap: float) -> dict:
     return out
 
 
-def run_method(V, F, method: str, max_gap: float, smoothing: float) -> tuple[dict, object]:
-    """One `improve_flattenability` call, timed: (row of figures, the `Improvement`)."""
+def run_method(V, F, method: str, max_gap: float, smoothing: float, label: str | None = None,
+               **kw) -> tuple[dict, object]:
+    """One `improve_flattenability` call (kw: its swarm settings), timed: (row of figures, the `Improvement`)."""
     import numpy as np
 
     from bolus_addon.core.improve import improve_flattenability
 
     gc.collect()
     t0, c0 = time.perf_counter(), time.process_time()
-    res = improve_flattenability(V, F, max_gap, method=method, rng=RNG, smoothing_mm=smoothing)
+    res = improve_flattenability(V, F, max_gap, method=method, rng=RNG, smoothing_mm=smoothing, **kw)
     dt, cpu = time.perf_counter() - t0, time.process_time() - c0
-    row = {"method": method, "max_gap_mm": max_gap, "smoothing_mm": smoothing, "seconds": dt, "cpu_seconds": cpu,
+    row = {"method": label or method, "max_gap_mm": max_gap, "smoothing_mm": smoothing, "seconds": dt, "cpu_seconds": cpu,
            "iterations": int(sum(p.iterations for p in res.patches)),
            "status": ", ".join(sorted({p.status for p in res.patches})), "cancelled": bool(res.cancelled),
            "warnings": list(res.warnings), "own_before": res.whole_before.as_dict(),
@@ -284,7 +289,7 @@ def gain(before: dict, after: dict, key: str) -> float:
 # ----------------------------------------------------------------------------- the run
 
 
-def bench_case(case: dict, darts: bool, log=print) -> dict:
+def bench_case(case: dict, darts: bool, seed_lpso: bool = False, log=print) -> dict:
     import numpy as np
 
     V, F = np.asarray(case["V"], dtype=np.float64), np.asarray(case["F"], dtype=np.int64)
@@ -299,33 +304,34 @@ def bench_case(case: dict, darts: bool, log=print) -> dict:
         f"{b['sum_varpi_3']:.2f}; unfold EL {pct(out['unfold_before'].get('EL'))} %")
     out["runs"] = []
     improved = {}
-    for s in case["smoothings"]:
-        for gap in case["gaps"]:
-            for method in METHODS:
-                try:
-                    row, res = run_method(V, F, method, gap, s)
-                except Exception as exc:
-                    out["runs"].append({**benchutil.error_row("method", method, exc), "max_gap_mm": gap,
-                                        "smoothing_mm": s})
-                    continue
-                a = row["after"]
-                row["gain_raw"] = gain(b, a, "raw")
-                row["gain_3"] = gain(b, a, "3")
-                try:
-                    row["unfold_after"] = unfold_figures(np.asarray(res.V, dtype=np.float64), F)
-                    el0 = out["unfold_before"].get("EL")
-                    row["el_ratio"] = (row["unfold_after"]["EL"] / el0 if el0 else None)
-                except Exception as exc:
-                    row["unfold_after"] = {"error": f"{type(exc).__name__}: {exc}"}
-                    row["el_ratio"] = None
-                out["runs"].append(row)
-                if gap == 1.0 and s == case["smoothings"][0]:
-                    improved[method] = np.asarray(res.V, dtype=np.float64)
-                log(f"    {method:<8} gap {gap:g} mm, sigma {s:g}: {row['seconds']:.2f} s, {row['iterations']} it, "
-                    f"sum varpi raw {b['sum_varpi_raw']:.2f} -> {a['sum_varpi_raw']:.2f} (x{row['gain_raw']:.2f}), "
-                    f"3 mm {b['sum_varpi_3']:.2f} -> {a['sum_varpi_3']:.2f} (x{row['gain_3']:.2f}), gap max "
-                    f"{row['gap_max']:.3f} mean {row['gap_mean']:.3f}, EL ratio {fmt(row['el_ratio'], 3)}"
-                    f"{'' if row['bounds_ok'] else '  BOUNDS VIOLATED'}")
+    plan = [(s, gap, method, method, {}) for s in case["smoothings"] for gap in case["gaps"] for method in METHODS]
+    if seed_lpso and case["kind"] == "free-form":
+        plan.append((0.0, max(case["gaps"]), "LPSO", SEED_LPSO_LABEL, SEED_LPSO))
+    for s, gap, method, label, kw in plan:
+        try:
+            row, res = run_method(V, F, method, gap, s, label, **kw)
+        except Exception as exc:
+            out["runs"].append({**benchutil.error_row("method", label, exc), "max_gap_mm": gap,
+                                "smoothing_mm": s})
+            continue
+        a = row["after"]
+        row["gain_raw"] = gain(b, a, "raw")
+        row["gain_3"] = gain(b, a, "3")
+        try:
+            row["unfold_after"] = unfold_figures(np.asarray(res.V, dtype=np.float64), F)
+            el0 = out["unfold_before"].get("EL")
+            row["el_ratio"] = (row["unfold_after"]["EL"] / el0 if el0 else None)
+        except Exception as exc:
+            row["unfold_after"] = {"error": f"{type(exc).__name__}: {exc}"}
+            row["el_ratio"] = None
+        out["runs"].append(row)
+        if gap == 1.0 and s == case["smoothings"][0] and not kw:
+            improved[method] = np.asarray(res.V, dtype=np.float64)
+        log(f"    {label:<8} gap {gap:g} mm, sigma {s:g}: {row['seconds']:.2f} s, {row['iterations']} it, "
+            f"sum varpi raw {b['sum_varpi_raw']:.2f} -> {a['sum_varpi_raw']:.2f} (x{row['gain_raw']:.2f}), "
+            f"3 mm {b['sum_varpi_3']:.2f} -> {a['sum_varpi_3']:.2f} (x{row['gain_3']:.2f}), gap max "
+            f"{row['gap_max']:.3f} mean {row['gap_mean']:.3f}, EL ratio {fmt(row['el_ratio'], 3)}"
+            f"{'' if row['bounds_ok'] else '  BOUNDS VIOLATED'}")
     if darts and case["kind"] in ("nose", "concave"):
         out["darts"] = []
         for label, W in [("original", V)] + [(f"{m} 1 mm", W) for m, W in improved.items()]:
@@ -410,16 +416,17 @@ def tables(results: list[dict]) -> tuple[Table, Table, Table]:
 
 
 def verdict(results: list[dict]) -> list[str]:
-    """Per case and method at 1 mm: which of the issue's three targets it meets (module doc), then per method the
-    cases where it meets all three.  The gain is judged on the optimiser's own scale (raw for sigma 0, else the
-    3 mm analysis copy); the raw gain is given beside it; time = wall clock per 1,000 vertices."""
+    """Per case and method at 1 mm (the free-form patch also at the seed's 3.6 mm): which of the issue's three
+    targets it meets (module doc), then per method the cases where it meets all three within 1 mm.  The gain is
+    judged on the optimiser's own scale (raw for sigma 0, else the 3 mm analysis copy); the raw gain is given
+    beside it; time = wall clock per 1,000 vertices; * = a one-piece pattern with overlaps (EL a poor guide)."""
     lines, full = [], {m: [] for m in METHODS}
     for r in results:
         if "error" in r:
             continue
         ref = SEED_GAIN["free-form" if r["kind"] == "free-form" else "nose"]
         for x in r["runs"]:
-            if "error" in x or x["max_gap_mm"] != 1.0:
+            if "error" in x or (x["max_gap_mm"] != 1.0 and r["kind"] != "free-form"):
                 continue
             own = x["gain_raw"] if x["smoothing_mm"] == 0 else x["gain_3"]
             g_ok = own >= ref
@@ -427,15 +434,16 @@ def verdict(results: list[dict]) -> list[str]:
             el_ok = x["el_ratio"] is not None and x["el_ratio"] <= TARGET_EL_RATIO
             star = "*" if overlapping(r["unfold_before"], x.get("unfold_after", {})) else ""
             lines.append(
-                f"{r['case']:<18} {x['method']:<8} σ {x['smoothing_mm']:g}: gain {own:6.2f} vs seed {ref:.1f} "
+                f"{r['case']:<18} {x['method']:<15} {x['max_gap_mm']:g} mm σ {x['smoothing_mm']:g}: gain {own:6.2f} "
+                f"vs seed {ref:.1f} "
                 f"{'MET   ' if g_ok else 'missed'} (raw {x['gain_raw']:.2f}); {x['seconds']:5.1f} s "
                 f"{'MET   ' if fast else 'missed'}; EL ratio {fmt(x['el_ratio'], 3)}{star} "
                 f"{'MET' if el_ok else 'missed'}")
-            if g_ok and fast and el_ok:
+            if g_ok and fast and el_ok and x["max_gap_mm"] == 1.0:
                 full.setdefault(x["method"], []).append(f"{r['case']} (σ {x['smoothing_mm']:g})")
     lines.append("")
     for m, cases in full.items():
-        lines.append(f"{m} meets all three on: {', '.join(cases) if cases else 'no case'}")
+        lines.append(f"{m} meets all three within 1 mm on: {', '.join(cases) if cases else 'no case'}")
     return lines
 
 
@@ -459,6 +467,8 @@ def main(argv=None) -> int:
                           repeat=None)
     ap.add_argument("--only", action="append", default=[], help="cases whose name contains this (repeatable)")
     ap.add_argument("--no-darts", dest="darts", action="store_false", help="leave out the sheet_pieces runs")
+    ap.add_argument("--no-seed-lpso", dest="seed_lpso", action="store_false",
+                    help="leave out LPSO at the seed's settings (NP 100, T 10,000, 30,000 iterations; ~4 min)")
     args = ap.parse_args(argv)
     t_all = time.perf_counter()
     print("flatten_bench: making the cases")
@@ -469,7 +479,7 @@ def main(argv=None) -> int:
             print(f"  {case['name']}: SKIPPED {case['error']}")
             results.append({"case": case["name"], "error": case["error"]})
             continue
-        results.append(bench_case(case, args.darts and not args.quick))
+        results.append(bench_case(case, args.darts and not args.quick, args.seed_lpso and not args.quick))
     t1, t2, t3 = tables(results)
     v = verdict(results)
     c = concave_lines(results)
