@@ -89,6 +89,7 @@ def test_quick_run_figures_are_sane(fb, tmp_path):
     """bench --quick on the free-form patch: both methods, bounds hold, FLV does not decrease (raw, the
     optimiser's own scale there), the EL ratio is EL after / EL before, the tables and verdict are written."""
     out, md = tmp_path / "f.json", tmp_path / "b.md"
+    md.write_text("# Benchmarks\n\n## Another bench\n\nIts table.\n")
     assert fb.main(["--quick", "--only", "free-form", "--json", str(out), "--markdown", str(md)]) == 0
     data = json.loads(out.read_text())
     (case,) = data["cases"]
@@ -107,3 +108,14 @@ def test_quick_run_figures_are_sane(fb, tmp_path):
     text = md.read_text()
     assert "bench/flatten_bench.py" in text and "seed nose (Table 4-4)" in text
     assert text.count("free-form 89") >= 3 and "Verdict at 1 mm" in text
+    assert text.startswith("# Benchmarks\n\n## Another bench\n\nIts table.\n") and text.count(fb.HEADING) == 1
+
+
+def test_markdown_section_replaces_its_old_copy(fb, tmp_path):
+    """A second run with --markdown replaces the section instead of appending a second copy."""
+    md = tmp_path / "b.md"
+    md.write_text(f"# Benchmarks\n\n{fb.HEADING}\n\nold figures\n\n## Another bench\n\nIts table.\n")
+    assert fb.main(["--quick", "--only", "free-form", "--markdown", str(md)]) == 0
+    text = md.read_text()
+    assert text.count(fb.HEADING) == 1 and "old figures" not in text and "Verdict at 1 mm" in text
+    assert text.rstrip().endswith("## Another bench\n\nIts table.")
