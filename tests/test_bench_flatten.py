@@ -85,6 +85,15 @@ def test_concave_spot_and_disk_helpers(fb):
     assert abs(len(Vd) - 300) <= 15 and 0 < r < 90 and len(Fd) > 0
 
 
+def test_border_distance(fb):
+    """Edge-path distance to the border: 0 on it, half the side in the middle of a square grid."""
+    V, F = meshgen.grid(10, 10, 100.0)
+    d = fb.border_distance(V, F)
+    on = (V[:, 0] % 100 == 0) | (V[:, 1] % 100 == 0)
+    assert (d[on] == 0).all() and (d[~on] > 0).all()
+    assert d[np.argmin(np.linalg.norm(V[:, :2] - 50.0, axis=1))] == pytest.approx(50.0)
+
+
 def test_quick_run_figures_are_sane(fb, tmp_path):
     """bench --quick on the free-form patch: both methods, bounds hold, FLV does not decrease (raw, the
     optimiser's own scale there), the EL ratio is EL after / EL before, the tables and verdict are written."""
@@ -104,7 +113,10 @@ def test_quick_run_figures_are_sane(fb, tmp_path):
         assert r["after"]["sum_varpi_raw"] <= case["before"]["sum_varpi_raw"] + 1e-9
         el0, el1 = case["unfold_before"]["EL"], r["unfold_after"]["EL"]
         assert 0 < el0 < 1 and 0 < el1 < 1 and r["el_ratio"] == pytest.approx(el1 / el0)
-        assert r["iterations"] > 0 and r["seconds"] > 0
+        assert r["iterations"] > 0 and r["seconds"] > 0 and r["folded"] == 0
+        for key in ("raw", "3"):  # the drop split near / far from the border adds up to the whole drop
+            drop = case["before"][f"sum_varpi_{key}"] - r["after"][f"sum_varpi_{key}"]
+            assert r[f"drop_{key}_near"] + r[f"drop_{key}_far"] == pytest.approx(drop, abs=1e-9)
     text = md.read_text()
     assert "bench/flatten_bench.py" in text and "seed nose (Table 4-4)" in text
     assert text.count("free-form 89") >= 3 and "Verdict at 1 mm" in text
