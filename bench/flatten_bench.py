@@ -491,6 +491,47 @@ def verdict(results: list[dict]) -> list[str]:
     return lines
 
 
+def summary(results: list[dict]) -> list[str]:
+    """Headline figures per method at 1 mm (the default settings, every case and sigma): time, gain on the
+    optimiser's own scale, EL ratio (patterns without overlaps), and per case where the 3 mm sum varpi dropped and
+    what the darts did (s = 3 mm runs)."""
+    import numpy as np
+
+    lines = []
+    for m in METHODS:
+        xs = [(r, x) for r in results if "error" not in r for x in r["runs"]
+              if "error" not in x and x["method"] == m and x["max_gap_mm"] == 1.0]
+        if not xs:
+            continue
+        t = np.array([x["seconds"] for _, x in xs])
+        g = np.array([x["gain_raw"] if x["smoothing_mm"] == 0 else x["gain_3"] for _, x in xs])
+        el = np.array([x["el_ratio"] for r, x in xs if x["el_ratio"] is not None
+                       and not overlapping(r["unfold_before"], x.get("unfold_after", {}))])
+        used = np.array([x["gap_max"] for _, x in xs])
+        lines.append(f"{m}: {len(xs)} runs at 1 mm; time {t.min():.1f}-{t.max():.1f} s (median {np.median(t):.1f}); "
+                     f"gain on its own scale {fmt_gain(g.min())}-{fmt_gain(g.max())} (median {fmt_gain(np.median(g))}); "
+                     f"EL ratio {el.min():.3f}-{el.max():.3f} (median {np.median(el):.3f}) on the {len(el)} without "
+                     f"overlaps; largest gap used {used.min():.2f}-{used.max():.2f} mm" if len(el) else f"{m}: no EL")
+    for r in results:
+        if "error" in r:
+            continue
+        x = next((x for x in r["runs"] if "error" not in x and x["method"] == "GRADIENT" and x["max_gap_mm"] == 1.0
+                  and x["smoothing_mm"] == ANALYSIS_MM), None)
+        if x is None:
+            continue
+        drop = x["drop_3_near"] + x["drop_3_far"]
+        share = x["drop_3_near"] / drop if drop > 0 else float("nan")
+        cell = (f"{r['case']}: GRADIENT 1 mm σ {ANALYSIS_MM:g}: 3 mm Σϖ drop {drop:.2f}, {100 * share:.0f} % of it "
+                f"within {BORDER_BAND_MM:g} mm of the border ({r['near_border_vertices']} of {r['vertices']} vertices)")
+        d = {e["surface"]: e for e in r.get("darts", []) if "error" not in e}
+        if "original" in d and "GRADIENT 1 mm" in d:
+            o, a = d["original"], d["GRADIENT 1 mm"]
+            cell += (f"; darts: {o['pieces']} pieces / {o['darts']} darts / {o['splits']} splits, worst EL "
+                     f"{pct(o['worst_EL'])} % -> {a['pieces']} / {a['darts']} / {a['splits']}, {pct(a['worst_EL'])} %")
+        lines.append(cell)
+    return lines
+
+
 def concave_lines(results: list[dict]) -> list[str]:
     """Per concave case and method: the largest gap used, the 3 mm-smoothed gain and the EL ratio at 1, 2, 3 mm
     allowed (does a larger allowed gap buy anything?)."""
@@ -530,6 +571,7 @@ def main(argv=None) -> int:
     t1, t2, t3 = tables(results)
     v = verdict(results)
     c = concave_lines(results)
+    sm = summary(results)
     print("\nSurface improvement (figures before -> after; gain = FLV after / FLV before):")
     print(t1.text("  "))
     print("\nUnfolded pattern of the original and of the improved surface (unfold_patch default):")
@@ -542,16 +584,18 @@ def main(argv=None) -> int:
     if c:
         print("\nConcave spots, 1 / 2 / 3 mm allowed: largest gap used (mm), 3 mm-smoothed gain, EL ratio:")
         print("\n".join("  " + ln for ln in c))
+    print("\nSummary:")
+    print("\n".join("  " + ln for ln in sm))
     total = time.perf_counter() - t_all
     path, args.markdown = args.markdown, None  # finish() would append; the section replaces its old copy instead
     benchutil.finish(args, {"cases": results}, total)
     if path:
-        text = markdown(results, t1, t2, t3, v, c, argv) + f"\n\n_Whole script: {total:.0f} s._\n"
+        text = markdown(results, t1, t2, t3, v, c, argv, sm) + f"\n\n_Whole script: {total:.0f} s._\n"
         unfold_bench.replace_markdown_section(path, HEADING, text, after=None)
     return 0
 
 
-def markdown(results, t1, t2, t3, v, c, argv) -> str:
+def markdown(results, t1, t2, t3, v, c, argv, sm=()) -> str:
     how = "; ".join(f"**{r['case']}**: {r['how']}" for r in results if "how" in r)
     parts = [HEADING, "",
              benchutil.run_line("flatten_bench.py", argv), "",
@@ -577,6 +621,8 @@ def markdown(results, t1, t2, t3, v, c, argv) -> str:
     if c:
         parts += ["", "Concave spots, 1 / 2 / 3 mm allowed: largest gap used (mm), 3 mm-smoothed gain, EL ratio:", "",
                   "```", *c, "```"]
+    if sm:
+        parts += ["", "Summary (computed from the tables above):", ""] + [f"* {ln}" for ln in sm]
     return "\n".join(parts)
 
 

@@ -121,6 +121,7 @@ def test_quick_run_figures_are_sane(fb, tmp_path):
     assert "bench/flatten_bench.py" in text and "seed nose (Table 4-4)" in text
     assert text.count("free-form 89") >= 3 and "Verdict at 1 mm" in text
     assert text.startswith("# Benchmarks\n\n## Another bench\n\nIts table.\n") and text.count(fb.HEADING) == 1
+    assert "* GRADIENT: 1 runs at 1 mm" in text and "* LPSO: 1 runs at 1 mm" in text
 
 
 def test_markdown_section_replaces_its_old_copy(fb, tmp_path):
