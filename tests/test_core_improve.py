@@ -262,3 +262,32 @@ def test_whole_region_crease_note_when_only_the_whole_gets_worse():
     assert any("become shallow creases" in m for _, m in improve_messages(res))
     res.whole_after.sum_varpi = res.whole_before.sum_varpi - 1.0
     assert not any("become shallow creases" in m for _, m in improve_messages(res))
+
+
+def test_smoothness_on_another_surface_gradient_and_batch():
+    """smooth_base: the smoothness (4-13) measured on the skin moved by the same offsets while the
+    angles are taken on the analysis copy (what ImproveJob does)."""
+    V, F = bumpy(noise=0.4)
+    Va = smooth_for_analysis(MeshTopology(V, F), 3.0)
+    ob = SurfaceObjective(Va, F, smooth_base=V)
+    rng = np.random.default_rng(5)
+    d = np.where(ob.movable, rng.uniform(0, 1, ob.n), 0.0)
+    L = uniform_laplacian(MeshTopology(V, F))
+    inner = MeshTopology(V, F).interior_vertices
+    assert ob.terms(d)[1] == pytest.approx(np.sum((L @ (V + ob.N * d[:, None]))[inner] ** 2))
+    _, g = ob.value_and_grad(d, smooth=1e-3)
+    for i in rng.choice(ob.movable_ids, 5, replace=False):
+        e = np.zeros(ob.n)
+        e[i] = 1e-6
+        fd = (ob.value_and_grad(d + e, 1e-3)[0] - ob.value_and_grad(d - e, 1e-3)[0]) / 2e-6
+        assert g[i] == pytest.approx(fd, rel=1e-4, abs=1e-5)
+    nodes = np.sort(rng.choice(ob.movable_ids, 9, replace=False))
+    D = rng.uniform(0, 1, (4, 9))
+    full = []
+    for row in D:
+        dd = d.copy()
+        dd[nodes] = row
+        full.append(ob.value(dd))
+    assert np.allclose(ob.batch_values(d, nodes, D), full, rtol=1e-10)
+    with pytest.raises(BolusError, match="smooth_base"):
+        SurfaceObjective(Va, F, smooth_base=V[:-1])

@@ -12,7 +12,11 @@ to flatten (J of eq. 4-21, `improve_objective.SurfaceObjective`), patch by patch
   normal (eq. 3-2) of the analysis copy at that vertex, taken once before any move (its
   "own original normal"; noise-free, and the mesh's own vertex normal when smoothing is
   0).  The offsets found are applied to the skin itself: V_out = V + N d, so the air gap of
-  a vertex (the seed's "distance between new and original positions") is d.
+  a vertex (the seed's "distance between new and original positions") is d.  The
+  smoothness term (4-13) is measured on that output, V + N d, not on the analysis copy:
+  the copy hides millimetre roughness in d, and with smoothness measured there the unfolded
+  pattern of the output got worse on 2 of 7 bench cases (EL x1.03 and x1.21); measured on the
+  output it was no worse on any (EL x0.83-1.00, bench/flatten_bench.py).
 * **Patches.** With patch labels (`bolus_patch`) every patch is optimised on its own with
   its border fixed (seed Table 4-4), so the borders two patches share never move and stay
   consistent; faces labelled -1 (outside a segmented region) are left alone.
@@ -282,7 +286,8 @@ class ImproveJob:
         Fl, ids = submesh(self.F, self._masks[rec.patch])
         self._ids = ids
         self._t_patch = time.perf_counter()
-        self._obj = obj = SurfaceObjective(self.Va[ids], Fl, self.N[ids], self.mu)
+        # angles and areas on the analysis copy, smoothness (4-13) on the skin that will be moved
+        self._obj = obj = SurfaceObjective(self.Va[ids], Fl, self.N[ids], self.mu, smooth_base=self.V[ids])
         rec.objective_before = rec.objective_after = obj.value(np.zeros(obj.n))
         varpi = np.where(obj.interior, np.abs(obj.theta0 - 2 * np.pi), 0.0)
         if len(obj.movable_ids) == 0:

@@ -83,16 +83,23 @@ def _angles_areas_batch(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class SurfaceObjective:
     """J of eq. 4-21 on one patch, as a function of the offsets d (n,) in mm.
 
-    X0 (n,3) the surface the angles are measured on (mm; the analysis copy of the skin),
+    X0 (n,3) the surface the angles and areas are measured on (mm; the analysis copy of the skin),
     F (m,3) its triangles (consistently wound), N (n,3) unit directions (default
     `outward_directions(X0, F)`), mu the weights (mu1..mu4), movable (n,) bool the
-    vertices allowed to move (default and at most: the interior vertices V_in).
+    vertices allowed to move (default and at most: the interior vertices V_in), smooth_base
+    (n,3) the surface whose smoothness (eq. 4-13) is measured, S(d) = smooth_base + N d
+    (default X0).
     Raises BolusError for a broken mesh or a bad N / mu.
     """
 
-    def __init__(self, X0, F, N=None, mu=MU_DEFAULT, movable=None):
+    def __init__(self, X0, F, N=None, mu=MU_DEFAULT, movable=None, smooth_base=None):
         X0, F = check_mesh(X0, F, "the patch")
         self.X0, self.F = X0, F
+        # the surface whose smoothness (4-13) is measured, moved by the same offsets: X0 itself, or
+        # (the driver's choice) the skin as it is while the angles are taken on its analysis copy
+        self.S0 = X0 if smooth_base is None else np.asarray(smooth_base, dtype=np.float64)
+        if self.S0.shape != X0.shape or not np.all(np.isfinite(self.S0)):
+            raise BolusError(f"smooth_base must be a finite ({len(X0)}, 3) array, got shape {self.S0.shape}")
         self.topo = topo = MeshTopology(X0, F)
         self.n, self.m = topo.n, topo.m
         self.N = outward_directions(X0, F) if N is None else np.asarray(N, dtype=np.float64)
@@ -121,6 +128,10 @@ class SurfaceObjective:
         """X(d) (n,3) = X0 + N d."""
         return self.X0 + self.N * np.asarray(d, dtype=np.float64)[:, None]
 
+    def smooth_positions(self, d) -> np.ndarray:
+        """S(d) (n,3) = smooth_base + N d: where the smoothness term (4-13) is measured."""
+        return self.S0 + self.N * np.asarray(d, dtype=np.float64)[:, None]
+
     def theta(self, d) -> np.ndarray:
         """Angle sums (n,) at X(d) (eq. 4-1)."""
         ang = corner_angles(self.positions(d), self.F)
@@ -134,7 +145,7 @@ class SurfaceObjective:
         ang = corner_angles(X, self.F)
         theta = np.bincount(self.F.ravel(), weights=ang.ravel(), minlength=self.n)
         t1 = float(np.abs(theta[self.interior] - TWO_PI).sum())
-        t2 = float(np.sum((self._Lin @ X) ** 2))
+        t2 = float(np.sum((self._Lin @ self.smooth_positions(d)) ** 2))
         t3 = float(np.sum(d * d))
         t4 = float(np.abs(face_areas(X, self.F) - self.A0).sum() / self.sum_A0)
         return np.array([t1, t2, t3, t4])
@@ -181,7 +192,7 @@ class SurfaceObjective:
         gX = np.stack([np.bincount(F.ravel(), weights=corner_grad[..., c].ravel(), minlength=self.n)
                        for c in range(3)], axis=1)
         # term 2: sum_{V_in} ||L x||^2 -> 2 L_in^T L_in X
-        LX = self._Lin @ X
+        LX = self._Lin @ self.smooth_positions(d)
         t2 = float(np.sum(LX * LX))
         gX += mu[1] * 2.0 * (self._Lin.T @ LX)
         t3 = float(np.sum(d * d))
@@ -198,10 +209,11 @@ class SurfaceObjective:
             ang = corner_angles(X, self.F)
             theta = np.bincount(self.F.ravel(), weights=ang.ravel(), minlength=self.n)
             A = face_areas(X, self.F)
+            S = self.smooth_positions(d)
             LX = np.zeros_like(X)
-            LX[self.interior] = self._Lin @ X
+            LX[self.interior] = self._Lin @ S
             self._base_cache = {
-                "X": X, "theta": theta, "A": A, "LX": LX, "ang": ang,
+                "X": X, "S": S, "theta": theta, "A": A, "LX": LX, "ang": ang,
                 "terms": np.array([
                     float(np.abs(theta[self.interior] - TWO_PI).sum()), float(np.sum(LX * LX)),
                     float(np.sum(d * d)), float(np.abs(A - self.A0).sum() / self.sum_A0)]),
@@ -270,7 +282,12 @@ class SurfaceObjective:
                                  - np.abs(base["A"][faces] - self.A0[faces]).sum()) / self.sum_A0
         rows = loc["rows"]
         nl = len(loc["local"])
-        LX = (loc["Lloc"] @ Xl.transpose(1, 0, 2).reshape(nl, 3 * P)).reshape(len(rows), P, 3)
+        if self.S0 is self.X0:
+            Sl = Xl
+        else:
+            Sl = np.broadcast_to(base["S"][loc["local"]], (P, nl, 3)).copy()
+            Sl[:, loc["node_pos"]] = self.S0[nodes] + self.N[nodes] * D[..., None]
+        LX = (loc["Lloc"] @ Sl.transpose(1, 0, 2).reshape(nl, 3 * P)).reshape(len(rows), P, 3)
         t2 = base["terms"][1] - np.sum(base["LX"][rows] ** 2) + np.einsum("rpc,rpc->p", LX, LX)
         t3 = base["terms"][2] - float(np.sum(d[nodes] ** 2)) + np.sum(D * D, axis=1)
         mu = self.mu
