@@ -9,7 +9,7 @@ from bolus_addon.core.improve import (ImproveJob, gradient_steps, improve_flatte
 from bolus_addon.core.improve_objective import SurfaceObjective, outward_directions, uniform_laplacian
 from bolus_addon.core.saliency import analyse, smooth_for_analysis
 from bolus_addon.core.topology import MeshTopology
-from meshgen import degenerate_variants, grid, height_field
+from meshgen import degenerate_variants, grid, height_field, icosphere
 
 
 def bumpy(n=14, noise=0.25, seed=1):
@@ -214,6 +214,8 @@ def test_bad_settings_and_meshes_are_refused():
     G[0] = G[0, ::-1]
     with pytest.raises(BolusError, match="consistently oriented"):
         ImproveJob(V, G, 1.0)
+    with pytest.raises(BolusError, match="closed surface"):
+        ImproveJob(*icosphere(2, 30.0), 1.0)
     with pytest.raises(BolusError, match="one patch per triangle"):
         ImproveJob(V, F, 1.0, patch_labels=np.zeros(3))
 

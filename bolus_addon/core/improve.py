@@ -235,6 +235,9 @@ class ImproveJob:
         if len(np.unique(he[:, 0] * topo.n + he[:, 1])) < len(he):
             raise BolusError("the region's faces are not consistently oriented, so 'outward' is not defined: "
                              "recalculate the normals first (Mesh > Normals > Recalculate Outside)")
+        if not topo.boundary_edges.any():
+            raise BolusError("the region is a closed surface, with no border to hold the bolus in place: select the "
+                             "treatment area (an open part of the skin), not the whole closed mesh")
         if not topo.interior_vertices.any():
             raise BolusError("the region has no interior vertices: every vertex is on its border, which stays "
                              "fixed, so nothing can move (select a larger area)")
