@@ -212,7 +212,6 @@ class BOLUS_OT_improve_flattenability(BolusOperator, bpy.types.Operator):
     method: improve_method_property()
     seed: seed_property()
 
-    _timer = None
     _run = None
 
     @classmethod
@@ -254,10 +253,7 @@ class BOLUS_OT_improve_flattenability(BolusOperator, bpy.types.Operator):
     # both: errors become reports (abort() first for modal), no window falls back to execute.
     def invoke(self, context, event):
         self._run = self._start(context)
-        wm = context.window_manager
-        wm.progress_begin(0, 100)
-        self._timer = wm.event_timer_add(0.01, window=context.window)
-        wm.modal_handler_add(self)
+        self.start_modal(context)
         self.report({"INFO"}, f"Improving flattenability ({self.method}, max gap {self.max_gap_mm:g} mm; "
                               "Esc keeps the best so far)")
         return {"RUNNING_MODAL"}
@@ -275,14 +271,6 @@ class BOLUS_OT_improve_flattenability(BolusOperator, bpy.types.Operator):
             return {"RUNNING_MODAL"}
         self.abort(context)
         return self.finish(context, self._run, job.result())
-
-    def abort(self, context):
-        """Remove the timer and the progress bar of the modal run (also after an error)."""
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
 
 
 classes = (BOLUS_OT_improve_flattenability,)

@@ -88,8 +88,26 @@ class BolusOperator:
     def run(self, context) -> set[str]:  # pragma: no cover - overridden
         raise NotImplementedError
 
+    _timer = None
+
+    def start_modal(self, context) -> set[str]:
+        """Begin a modal run (unfold, improve_flattenability): the progress bar, a 10 ms timer
+        whose ticks drive ``modal``, and this operator as the modal handler."""
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+        self._timer = wm.event_timer_add(0.01, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
     def abort(self, context) -> None:
-        """Undo what a modal run set up (timers, progress bar) after an error; default: nothing."""
+        """Undo what `start_modal` set up (the timer, the progress bar): at the end of a modal run,
+        on Esc and after an error; nothing when no modal run was started."""
+        if self._timer is None:
+            return
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        self._timer = None
+        wm.progress_end()
 
     def execute(self, context):
         wm = self._progress_start(context)

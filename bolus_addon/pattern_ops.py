@@ -184,7 +184,6 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
     refine: refine_property()
     gap_mm: gap_property()
 
-    _timer = None
     _job = None
 
     @classmethod
@@ -225,10 +224,7 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
     def invoke(self, context, event):
         self._job = _UnfoldJob(context, self.method, self.refine, self.gap_mm, self.max_el, self.sheet_thickness_mm,
                          progress=self.progress)
-        wm = context.window_manager
-        wm.progress_begin(0, 100)
-        self._timer = wm.event_timer_add(0.01, window=context.window)
-        wm.modal_handler_add(self)
+        self.start_modal(context)
         self.report({"INFO"}, f"Unfolding {self._job.count} islands (Esc to cancel)")
         return {"RUNNING_MODAL"}
 
@@ -245,14 +241,6 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
             return {"RUNNING_MODAL"}
         self.abort(context)
         return self.finish(context, self._job)
-
-    def abort(self, context):
-        """Remove the timer and the progress bar of the modal run (also after an error)."""
-        wm = context.window_manager
-        if self._timer is not None:
-            wm.event_timer_remove(self._timer)
-            self._timer = None
-        wm.progress_end()
 
 
 classes = (BOLUS_OT_unfold,)

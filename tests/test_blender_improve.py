@@ -387,7 +387,7 @@ def test_esc_keeps_the_best_so_far(bpy_addon, raw):
 
     class Fake(BolusOperator):
         bl_idname = "BOLUS_OT_fake_improve"
-        modal, finish, abort = Op.__dict__["modal"], Op.__dict__["finish"], Op.__dict__["abort"]
+        modal, finish = Op.__dict__["modal"], Op.__dict__["finish"]  # abort: BolusOperator's
         _timer = None
 
         def __init__(self):
