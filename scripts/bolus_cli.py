@@ -20,10 +20,15 @@ mm in the file's frame) and runs the --steps in this order:
   print    bolus.print_segment (--parts, --seed), bolus.orient_parts, bolus.export_parts on the
            bolus: parts/*.stl (binary, mm, closed)              (needs shell: added)
 
-and writes report.json (every step's tables and figures, the operators' INFO / WARNING lines, the
-warnings, seconds, the outputs), result.blend and, with --png, surface.png / pattern.png / parts.png.
-Exit code 0 on success; 2 when an operator refuses (its message on stderr, report.json written with
-what finished and "error") or an argument is wrong.  The input file is only read.
+and writes report.json, result.blend and, with --png, surface.png (a front view from -Y, the
+patient's anterior in a planning system's frame), pattern.png, parts.png.  report.json holds: input
+(path, units, sha256, unchanged), area, steps / steps_added / steps_done, results (per step: the
+tables and figures the operators leave as custom properties, JSON decoded), reports (every INFO /
+WARNING / ERROR line with its step and operator), warnings, seconds (per operator), step_seconds,
+outputs and error (null, or the step and message).
+Exit code 0 on success; 2 when an operator refuses or the area selects nothing (the message on
+stderr, report.json written with what finished and "error") or an argument is wrong (argparse);
+1 on an unexpected error (traceback on stderr, report.json written).  The input file is only read.
 """
 from __future__ import annotations
 
@@ -137,7 +142,7 @@ def captured_stdout():
     """Capture fd 1 (Python's prints and Blender's C-level report lines) into a list of lines,
     echoed on the real stdout afterwards."""
     lines: list[str] = []
-    libc = ctypes.CDLL(None)
+    libc = _libc()
     sys.stdout.flush()
     libc.fflush(None)
     saved = os.dup(1)
@@ -154,6 +159,23 @@ def captured_stdout():
             text = tmp.read().decode("utf-8", "replace")
             os.write(1, text.encode("utf-8"))
             lines.extend(text.splitlines())
+
+
+def _libc():
+    """The C library whose stdout buffer Blender writes its report lines to (fflush(NULL) empties it);
+    a stand-in where it cannot be loaded (the lines then may reach the console uncollected)."""
+    for name in (None, "ucrtbase", "msvcrt"):
+        try:
+            return ctypes.CDLL(name)
+        except (OSError, TypeError):  # TypeError: CDLL(None) on Windows
+            continue
+
+    class _NoLibc:
+        @staticmethod
+        def fflush(_):
+            return 0
+
+    return _NoLibc()
 
 
 REPORT_PREFIXES = {"Info: ": "INFO", "Warning: ": "WARNING", "Error: ": "ERROR"}
@@ -184,7 +206,8 @@ class Run:
         self.report: dict = {
             "input": {"path": str(args.stl.resolve()), "units": args.units, "sha256": sha256(args.stl)},
             "steps": args.plan, "steps_added": args.added, "steps_done": [],
-            "area": None, "results": {}, "reports": [], "warnings": [], "seconds": {}, "outputs": [],
+            "area": None, "results": {}, "reports": [], "warnings": [], "seconds": {}, "step_seconds": {},
+            "outputs": [],
             "error": None,
         }
         self.skin = None  # the imported mesh (its treatment area is the region)
@@ -418,7 +441,9 @@ class Run:
             step = "area"
             self.select_area()
             for step in self.args.plan:
+                t = time.perf_counter()
                 getattr(self, f"step_{step}")()
+                self.report["step_seconds"][step] = round(time.perf_counter() - t, 3)
             if self.args.png:
                 step = "png"
                 self.pictures()

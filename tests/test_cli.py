@@ -79,6 +79,7 @@ def test_default_steps_write_the_pattern_in_mm(stl, tmp_path):
     assert pattern["islands"] and 0.0 <= pattern["EL"] < 0.1
     assert report["results"]["preview"]["bolus_sum_varpi"] > 0
     assert any(r["operator"] == "bolus.segment" and r["type"] == "INFO" for r in report["reports"])
+    assert list(report["step_seconds"]) == report["steps_done"]
     assert set(report["seconds"]) >= {"saliency_preview", "segment", "smooth_cuts", "unfold", "export_pattern"}
     assert {"pattern.svg", "pattern.dxf", "pattern_a4.pdf", "report.json"} <= set(report["outputs"])
 
@@ -132,6 +133,15 @@ def test_sphere_selects_the_area_and_improve_feeds_unfold(stl, tmp_path):
     assert report["results"]["unfold"]["source"] == "skin_improved"
     assert report["results"]["improve"]["bolus_max_air_gap_mm"] <= 1.0 + 1e-6
     assert (out / "pattern.svg").is_file()
+
+
+def test_units_scale_the_mesh_and_warnings_are_collected(stl, tmp_path):
+    """The 70 mm bump read as metres is 70 m wide: the operators' units warning lands in report.json."""
+    run, report = run_cli(stl, tmp_path / "metres", "--units", "m", "--steps", "preview")
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert any("units are probably wrong" in w for w in report["warnings"]), report["warnings"]
+    run, report = run_cli(stl, tmp_path / "mm", "--steps", "preview")
+    assert report["warnings"] == []
 
 
 @pytest.mark.smoke
