@@ -409,8 +409,8 @@ class Run:
                   part_figures=[{"object": p.name, **props(p)} for p in parts])
 
     def pictures(self) -> None:
-        """surface.png (front view from -Y, the patients' anterior in a planning system's frame:
-        coloured by patch or flattenability), pattern.png (area distortion), parts.png (overhangs)."""
+        """surface.png (the skin alone, seen along the treatment area's mean normal, coloured by patch
+        or flattenability), pattern.png (area distortion), parts.png (overhangs): demo.py's renderers."""
         import demo
 
         demo.setup_render(self.skin, self.args.png_height)
@@ -418,7 +418,7 @@ class Run:
             colours = self.skin.data.color_attributes
             colour = next((c for c in ("bolus_patch_color", "bolus_saliency_color") if c in colours), None)
             if colour is not None:
-                demo.render(self.skin, colour, self.out / "surface.png")
+                self.render_surface(colour, self.out / "surface.png")
                 self.output(self.out / "surface.png")
             pattern = getattr(self, "pattern", None)
             if pattern is not None and "bolus_area_distortion" in pattern.data.color_attributes:
@@ -432,6 +432,48 @@ class Run:
                         and ob not in part_objects(bolus.name)]
                 demo.render_parts(hide, part_objects(bolus.name), self.out / "parts.png")
                 self.output(self.out / "parts.png")
+
+    def render_surface(self, colour: str, path: Path) -> None:
+        """The skin alone (other objects hidden), the camera looking at the treatment area (or the whole
+        mesh) against its area-weighted mean normal, framing it."""
+        import demo
+        from mathutils import Matrix
+
+        scene, obj = bpy.context.scene, self.skin
+        me = obj.data
+        n = len(me.polygons)
+        centre, normal, area = (np.zeros(n * 3), np.zeros(n * 3), np.zeros(n))
+        me.polygons.foreach_get("center", centre)
+        me.polygons.foreach_get("normal", normal)
+        me.polygons.foreach_get("area", area)
+        mask = self.region_mask(obj)
+        mask = np.ones(n, dtype=bool) if mask is None else mask
+        centre, normal, area = centre.reshape(-1, 3)[mask], normal.reshape(-1, 3)[mask], area[mask]
+        view = (normal * area[:, None]).sum(axis=0)
+        view = view / np.linalg.norm(view) if np.linalg.norm(view) > 1e-9 else np.array([0.0, -1.0, 0.0])
+        up = np.array([0.0, 0.0, 1.0]) if abs(view[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        right = np.cross(up, view)
+        right /= np.linalg.norm(right)
+        up = np.cross(view, right)
+        lo, hi = centre.min(axis=0), centre.max(axis=0)
+        mid = (lo + hi) / 2
+        rel = centre - mid
+        w, h = np.ptp(rel @ right), np.ptp(rel @ up)
+        rx, ry = scene.render.resolution_x, scene.render.resolution_y
+        cam = scene.camera
+        cam.rotation_mode = "QUATERNION"
+        cam.rotation_quaternion = Matrix(np.c_[right, up, view].tolist()).to_quaternion()  # looks along -view
+        # the ortho scale spans the longer side of the image (sensor fit AUTO)
+        cam.data.ortho_scale = float((max(w, h * rx / ry) if rx >= ry else max(h, w * ry / rx)) * 1.15) or 1.0
+        size = float(np.linalg.norm(np.ptp(np.array([v.co for v in me.vertices]), axis=0)))
+        cam.location = tuple(float(x) for x in mid + view * 2.0 * size)
+        cam.data.clip_end = 5.0 * size
+        others = [ob for ob in scene.objects if ob is not obj and ob.type == "MESH" and not ob.hide_render]
+        for ob in others:
+            ob.hide_render = True
+        demo.render(obj, colour, path)
+        for ob in others:
+            ob.hide_render = False
 
     def execute(self) -> int:
         code = 0

@@ -144,6 +144,25 @@ def test_units_scale_the_mesh_and_warnings_are_collected(stl, tmp_path):
     assert report["warnings"] == []
 
 
+def test_obj_and_ply_are_read_in_the_files_own_frame(stl, tmp_path):
+    """The same bump as OBJ and PLY: the same --sphere (off-centre, so a Y-up conversion would move
+    it off the area) selects the same faces as on the STL."""
+    V, F = np.unique(read_stl(stl).reshape(-1, 3), axis=0, return_inverse=True)
+    F = F.reshape(-1, 3)
+    (tmp_path / "skin.obj").write_text("".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in V)
+                                       + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in F))
+    (tmp_path / "skin.ply").write_text(
+        f"ply\nformat ascii 1.0\nelement vertex {len(V)}\nproperty float x\nproperty float y\nproperty float z\n"
+        f"element face {len(F)}\nproperty list uchar int vertex_indices\nend_header\n"
+        + "".join(f"{x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in V) + "".join(f"3 {a} {b} {c}\n" for a, b, c in F))
+    faces = {}
+    for path in (stl, tmp_path / "skin.obj", tmp_path / "skin.ply"):
+        run, report = run_cli(path, tmp_path / path.suffix[1:], "--sphere", "0", "12", "6", "10", "--steps", "preview")
+        assert run.returncode == 0, (path.name, run.stderr[-3000:])
+        faces[path.suffix] = (report["area"]["faces"], report["input"]["faces"])
+    assert faces[".obj"] == faces[".ply"] == faces[".stl"] and 0 < faces[".stl"][0] < faces[".stl"][1], faces
+
+
 @pytest.mark.smoke
 @pytest.mark.parametrize("args, says", [
     (("--steps", "preview,foo"), "unknown step"),
