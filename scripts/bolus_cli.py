@@ -289,16 +289,22 @@ class Run:
         ext = a.stl.suffix.lower()
         before = set(bpy.data.objects)
         with captured_stdout():
-            if ext == ".stl":
-                bpy.ops.wm.stl_import(filepath=path, global_scale=scale, use_scene_unit=False)
-            elif ext == ".obj":  # the file's own axes (no Y-up conversion), so --point is in its frame
-                bpy.ops.wm.obj_import(filepath=path, global_scale=scale, forward_axis="Y", up_axis="Z")
-            else:
-                bpy.ops.wm.ply_import(filepath=path, global_scale=scale, forward_axis="Y", up_axis="Z")
+            try:
+                if ext == ".stl":
+                    bpy.ops.wm.stl_import(filepath=path, global_scale=scale, use_scene_unit=False)
+                elif ext == ".obj":  # the file's own axes (no Y-up conversion), so --point is in its frame
+                    bpy.ops.wm.obj_import(filepath=path, global_scale=scale, forward_axis="Y", up_axis="Z")
+                else:
+                    bpy.ops.wm.ply_import(filepath=path, global_scale=scale, forward_axis="Y", up_axis="Z")
+            except RuntimeError as exc:
+                raise StepRefused(f"{a.stl.name} could not be read: {str(exc).strip()}") from None
         new = [ob for ob in bpy.data.objects if ob not in before and ob.type == "MESH"]
         if len(new) != 1:
             raise StepRefused(f"{a.stl.name}: expected one mesh, the importer made {len(new)}")
         obj = new[0]
+        if len(obj.data.polygons) == 0:
+            raise StepRefused(f"{a.stl.name}: no faces read ({len(obj.data.vertices)} vertices): "
+                              "the bolus tools need a surface mesh")
         self.activate(obj, region=False)
         bpy.ops.object.transform_apply(location=False, rotation=True, scale=True)  # vertices in mm
         self.skin = self.surface = obj

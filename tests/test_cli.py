@@ -164,6 +164,17 @@ def test_obj_and_ply_are_read_in_the_files_own_frame(stl, tmp_path):
 
 
 @pytest.mark.smoke
+@pytest.mark.parametrize("content, says", [(b"", "could not be read"), (bytes(80) + struct.pack("<I", 0), "no faces")])
+def test_unreadable_or_empty_file_is_refused(tmp_path, content, says):
+    pytest.importorskip("bpy")
+    bad = tmp_path / "bad.stl"
+    bad.write_bytes(content)
+    run, report = run_cli(bad, tmp_path / "out")
+    assert run.returncode == 2 and says in run.stderr, run.stderr[-2000:]
+    assert report["error"]["step"] == "load" and "Traceback" not in run.stderr
+
+
+@pytest.mark.smoke
 @pytest.mark.parametrize("args, says", [
     (("--steps", "preview,foo"), "unknown step"),
     (("--units", "inch"), "invalid choice"),
