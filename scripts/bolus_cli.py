@@ -39,6 +39,7 @@ import json
 import os
 import sys
 import tempfile
+import threading
 import time
 import traceback
 from contextlib import contextmanager
@@ -139,26 +140,46 @@ def plan_steps(text: str) -> tuple[list[str], list[str]]:
 
 @contextmanager
 def captured_stdout():
-    """Capture fd 1 (Python's prints and Blender's C-level report lines) into a list of lines,
-    echoed on the real stdout afterwards."""
+    """Capture fd 1 (Python's prints and Blender's C-level report lines) into a list of lines, echoed on
+    the real stdout as they come (a thread tails the capture file, so long steps still show progress)."""
     lines: list[str] = []
     libc = _libc()
     sys.stdout.flush()
     libc.fflush(None)
     saved = os.dup(1)
-    with tempfile.TemporaryFile() as tmp:
-        os.dup2(tmp.fileno(), 1)
-        try:
-            yield lines
-        finally:
-            sys.stdout.flush()
-            libc.fflush(None)
-            os.dup2(saved, 1)
-            os.close(saved)
-            tmp.seek(0)
-            text = tmp.read().decode("utf-8", "replace")
-            os.write(1, text.encode("utf-8"))
-            lines.extend(text.splitlines())
+    fd, path = tempfile.mkstemp(prefix="bolus_cli_", suffix=".log")
+    reader = open(path, "rb")
+    chunks: list[bytes] = []
+    stop = threading.Event()
+
+    def echo():
+        data = reader.read()
+        if data:
+            chunks.append(data)
+            os.write(saved, data)
+
+    def tail():
+        while not stop.wait(0.25):
+            echo()
+
+    os.dup2(fd, 1)
+    thread = threading.Thread(target=tail, daemon=True)
+    thread.start()
+    try:
+        yield lines
+    finally:
+        sys.stdout.flush()
+        libc.fflush(None)
+        stop.set()
+        thread.join()
+        os.dup2(saved, 1)
+        echo()
+        for close in (lambda: os.close(saved), lambda: os.close(fd), reader.close, lambda: os.unlink(path)):
+            try:
+                close()
+            except OSError:
+                pass
+        lines.extend(b"".join(chunks).decode("utf-8", "replace").splitlines())
 
 
 def _libc():
