@@ -20,8 +20,8 @@ mm in the file's frame) and runs the --steps in this order:
   print    bolus.print_segment (--parts, --seed), bolus.orient_parts, bolus.export_parts on the
            bolus: parts/*.stl (binary, mm, closed)              (needs shell: added)
 
-and writes report.json, result.blend and, with --png, surface.png (a front view from -Y, the
-patient's anterior in a planning system's frame), pattern.png, parts.png.  report.json holds: input
+and writes report.json, result.blend and, with --png, surface.png (the skin alone, seen along
+the treatment area's mean normal, coloured by patch), pattern.png, parts.png.  report.json holds: input
 (path, units, sha256, unchanged), area, steps / steps_added / steps_done, results (per step: the
 tables and figures the operators leave as custom properties, JSON decoded), reports (every INFO /
 WARNING / ERROR line with its step and operator), warnings, seconds (per operator), step_seconds,
