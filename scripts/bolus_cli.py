@@ -299,12 +299,9 @@ class Run:
     # -- the steps ------------------------------------------------------------------------------
     def load(self) -> None:
         a = self.args
-        bpy.ops.wm.read_factory_settings(use_empty=True)
-        ensure_addon()
-        scene = bpy.context.scene
-        scene.unit_settings.system = "METRIC"
-        scene.unit_settings.scale_length = 0.001  # 1 unit = 1 mm
-        scene.unit_settings.length_unit = "MILLIMETERS"
+        from demo import mm_scene
+
+        mm_scene()
         scale = UNITS_MM[a.units]
         path = str(a.stl.resolve())
         ext = a.stl.suffix.lower()
@@ -576,13 +573,6 @@ def _json_default(v):
 
 def sha256(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
-def ensure_addon() -> None:
-    if not hasattr(bpy.ops, "bolus") or not hasattr(bpy.types.Scene, "bolus"):
-        import bolus_addon
-
-        bolus_addon.register()
 
 
 def main(argv=None) -> int:

@@ -81,13 +81,19 @@ def ensure_addon():
         bolus_addon.register()
 
 
-def load_example() -> bpy.types.Object:
+def mm_scene() -> bpy.types.Scene:
+    """An empty scene in which 1 unit = 1 mm, the add-on registered (demo and scripts/bolus_cli.py)."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     ensure_addon()
     scene = bpy.context.scene
     scene.unit_settings.system = "METRIC"
     scene.unit_settings.scale_length = 0.001  # 1 unit = 1 mm
     scene.unit_settings.length_unit = "MILLIMETERS"
+    return scene
+
+
+def load_example() -> bpy.types.Object:
+    mm_scene()
     bpy.ops.wm.obj_import(filepath=str(EXAMPLE), global_scale=CM_TO_MM)
     obj = bpy.context.selected_objects[0]
     obj.name = "face"
