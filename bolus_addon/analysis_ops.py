@@ -45,7 +45,7 @@ def show_attribute_colors(context) -> None:
 
 
 class BOLUS_OT_saliency_preview(BolusOperator, bpy.types.Operator):
-    """Colour the surface by where it cannot lie flat (flattenability and saliency, eqs. 4-1..4-4)"""
+    """Colour the active skin mesh (its selected faces in Edit Mode, else all of it) by where it cannot lie flat (flattenability and saliency, eqs. 4-1..4-4). Needs a surface mesh at true size; makes the attributes bolus_flattenability and bolus_saliency with a colour, and reports Σϖ and FLV"""
 
     bl_idname = "bolus.saliency_preview"
     bl_label = "Flattenability Preview"
@@ -89,10 +89,16 @@ def format_patch_row(row: dict) -> str:
 
 
 class BOLUS_OT_segment(BolusOperator, bpy.types.Operator):
-    """Split the surface into patches that flatten well (saliency-aware spectral clustering, eqs. 3-3..3-8, 4-5)"""
+    """Split the active skin (its selected faces in Edit Mode, else all of it) into patches that flatten well (saliency-aware spectral clustering, eqs. 3-3..3-8, 4-5). Needs a manifold surface in one piece; makes the face attribute bolus_patch, seams on the borders and the patch table"""
 
     bl_idname = "bolus.segment"
     bl_label = "Segment into Patches"
+
+    @classmethod
+    def poll(cls, context):
+        from .guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
+
+        return poll_for(cls, context)
 
     patches: patches_property()
     eta: eta_property()

@@ -22,7 +22,7 @@ _TMP_ATTR = "bolus_area_tmp"
 
 
 class BOLUS_OT_select_area(BolusOperator, bpy.types.Operator):
-    """Select the treatment area around the 3D cursor: the faces within the radius along the surface, the border cut along a smooth curve, cavities (inside the nostrils) left out; changes the mesh"""
+    """Select the treatment area around the 3D cursor on the active skin mesh: the faces within the radius along the surface, the border cut along a smooth curve, cavities (inside the nostrils) left out. Needs the 3D cursor on the skin (Shift+right-click); changes the mesh and leaves it in Edit Mode with the area selected"""
 
     bl_idname = "bolus.select_area"
     bl_label = "Select Treatment Area"

@@ -34,10 +34,16 @@ def format_cut_row(r: dict) -> str:
 
 
 class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
-    """Replace the jagged patch borders by smooth cut lines on the surface (seed 4.1.2); changes the mesh"""
+    """Replace the jagged patch borders by smooth cut lines on the surface (seed 4.1.2). Needs patches (Segment into Patches); changes the mesh: new vertices along the cuts, bolus_patch and seams updated (Ctrl+Z undoes it)"""
 
     bl_idname = "bolus.smooth_cuts"
     bl_label = "Smooth Cut Lines"
+
+    @classmethod
+    def poll(cls, context):
+        from .guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
+
+        return poll_for(cls, context)
 
     def run(self, context):
         obj, region, labels = _read_patches(context)

@@ -203,7 +203,7 @@ def improve_reports(run: _ImproveRun, res, obj_name: str) -> list[tuple[str, str
 
 
 class BOLUS_OT_improve_flattenability(BolusOperator, bpy.types.Operator):
-    """Move the surface outward along its normals, by at most the max air gap, until it flattens better (eq. 4-21, L-PSO of Algorithms 4-1, 4-2, or a gradient method): a new object '<name>_improved' with the air-gap map"""
+    """Move the surface outward along its normals, by at most the max air gap, until it flattens better (eq. 4-21, L-PSO of Algorithms 4-1, 4-2, or a gradient method). Needs a skin region with a border (patches optional); makes a new object '<name>_improved' with the air-gap map, the skin unchanged"""
 
     bl_idname = "bolus.improve_flattenability"
     bl_label = "Improve Flattenability"
@@ -215,21 +215,10 @@ class BOLUS_OT_improve_flattenability(BolusOperator, bpy.types.Operator):
     _run = None
 
     @classmethod
-    def poll(cls, context):
-        if not super().poll(context):
-            return False
-        obj = context.active_object
-        if is_pattern_object(obj):
-            src = obj.get(PROP_SOURCE, obj.name.removesuffix(PATTERN_SUFFIX))
-            cls.poll_message_set(f"'{obj.name}' is a pattern made by Unfold: select its source '{src}' "
-                                 "and improve that")
-            return False
-        if is_improved_object(obj):  # would make '<name>_improved_improved'
-            src = obj.get(PROP_SOURCE, obj.name.removesuffix(IMPROVED_SUFFIX))
-            cls.poll_message_set(f"'{obj.name}' was made by Improve Flattenability: select its source '{src}' "
-                                 "and improve that (with another max gap or method)")
-            return False
-        return True
+    def poll(cls, context):  # not on a pattern, nor on '<name>_improved' (would make '<name>_improved_improved')
+        from .guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
+
+        return poll_for(cls, context)
 
     def _start(self, context) -> _ImproveRun:
         return _ImproveRun(self, context, self.max_gap_mm, self.method, self.seed)

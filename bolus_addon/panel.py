@@ -1,17 +1,72 @@
-"""Sidebar panel (3D View > Sidebar > Bolus)."""
+"""Sidebar panel (3D View > Sidebar > Bolus): a guided walk through a case, and the Bolus menu (F3).
+
+The steps in order: 1 Select area, 2 Preview, 3 Segment, 4 Smooth cuts, 5 Improve (optional),
+6a Sheet pattern (unfold, export) or 6b Printed bolus (shell, print parts, orient, export parts).
+Each step has a number, a one-line hint, and, when its input is missing, is greyed with the
+reason as a label (the operators' poll message, `guide.reason`); the next step for the active
+object is marked with an arrow and drawn as a larger, pressed button.  The unit in use, a
+warning when the object's size says the units are wrong, the tables and the advice are shown
+as they come.  The same operators are in *Object / Mesh > Bolus*, which F3 finds.
+"""
 from __future__ import annotations
 
-import bpy
+import textwrap
 
-from . import mesh_io
+import bpy
+import numpy as np
+
+from . import guide, mesh_io
 from .cut_ops import PROP_CUT_TABLE
 from .improve_ops import IMPROVED_SUFFIX, PROP_IMPROVE_TABLE
 from .operators import PROP_FLV, PROP_PATCH_TABLE, PROP_SUM_VARPI
 from .pattern_ops import PATTERN_SUFFIX, PROP_PATTERN_TABLE
-from .print_ops import PROP_ORIENT_TABLE, PROP_PART_SOURCE, PROP_PRINT_TABLE
+from .print_ops import ATTR_PRINT_PART, PROP_ORIENT_TABLE, PROP_PART_SOURCE, PROP_PRINT_TABLE, part_objects
 from .shell_ops import (BOLUS_SUFFIX, PROP_MASS, PROP_THICKNESS_MAX, PROP_THICKNESS_MEAN, PROP_THICKNESS_MIN,
                         PROP_VOLUME, is_bolus_object)
 from .solid_print_ops import PROP_CONNECTORS
+
+#: the line every user reads (README "Intended use")
+DISCLAIMER = "A planning aid, not a medical device: check every bolus on the planning CT before treatment"
+
+#: operator property <- Scene.bolus property, for the buttons of the panel and the menu
+OP_SETTINGS = {
+    "bolus.select_area": {"radius_mm": "area_radius_mm", "exclude_cavities": "exclude_cavities"},
+    "bolus.saliency_preview": {"smoothing_mm": "smoothing_mm", "color_by": "color_by"},
+    "bolus.segment": {"patches": "patches", "eta": "eta", "seed": "seed", "smoothing_mm": "smoothing_mm",
+                      "method": "method"},
+    "bolus.smooth_cuts": {},
+    "bolus.improve_flattenability": {"max_gap_mm": "max_gap_mm", "method": "improve_method", "seed": "seed"},
+    "bolus.unfold": {"method": "unfold_method", "refine": "refine", "gap_mm": "gap_mm", "max_el": "max_el_pct",
+                     "sheet_thickness_mm": "sheet_thickness_mm"},
+    "bolus.export_pattern": {"seam_allowance_mm": "seam_allowance_mm", "page": "page", "label": "label"},
+    "bolus.make_shell": {"thickness_mm": "thickness_mm", "clearance_mm": "clearance_mm",
+                         "resolution_mm": "resolution_mm", "label": "label"},
+    "bolus.print_segment": {"parts": "parts", "method": "print_method", "seed": "seed"},
+    "bolus.orient_parts": {"layer_mm": "layer_mm", "skin_side_up": "skin_side_up"},
+    "bolus.export_parts": {},
+}
+
+#: (number, title, icon, one-line hint) of every step, in order
+STEPS = {
+    "area": ("1", "Select area", "PIVOT_CURSOR", "Faces around the 3D cursor, or select by hand"),
+    "preview": ("2", "Preview", "COLOR", "Colours where the skin cannot lie flat"),
+    "segment": ("3", "Segment", "MESH_ICOSPHERE", "Patches that flatten well"),
+    "cuts": ("4", "Smooth cuts", "IPO_EASE_IN_OUT", "Smooth patch borders (changes the mesh)"),
+    "improve": ("5", "Improve (optional)", "MOD_SMOOTH", "A flatter copy, at most Max gap off the skin"),
+    "sheet": ("6a", "Sheet pattern", "UV", "Unfold flat at true size, then export"),
+    "print": ("6b", "Printed bolus", "MOD_SOLIDIFY", "Solid, print parts, orient, export STL"),
+}
+#: the step each operator belongs to
+STEP_OF = {"bolus.select_area": "area", "bolus.saliency_preview": "preview", "bolus.segment": "segment",
+           "bolus.smooth_cuts": "cuts", "bolus.improve_flattenability": "improve", "bolus.unfold": "sheet",
+           "bolus.export_pattern": "sheet", "bolus.make_shell": "print", "bolus.print_segment": "print",
+           "bolus.orient_parts": "print", "bolus.export_parts": "print"}
+
+
+def set_settings(op, idname: str, s) -> None:
+    """The Scene.bolus settings onto the operator properties of a button (`OP_SETTINGS`)."""
+    for op_name, scene_name in OP_SETTINGS.get(idname, {}).items():
+        setattr(op, op_name, getattr(s, scene_name))
 
 
 def draw_table(layout, heads, rows, alert=()) -> None:
@@ -65,42 +120,184 @@ def draw_pattern_table(layout, t: dict) -> None:
             col.label(text=f"{r.get('name', r['patch'])}: {why or r.get('sheet_reason') or 'see the warnings'}")
 
 
-def draw_saliency(box, s, obj):
-    row = box.row(align=True)  # the treatment area around the 3D cursor (select_area), before the analysis
-    row.prop(s, "area_radius_mm", text="Radius (mm)")
-    row.prop(s, "exclude_cavities")
-    op = box.operator("bolus.select_area", icon="PIVOT_CURSOR")
-    op.radius_mm, op.exclude_cavities = s.area_radius_mm, s.exclude_cavities
-    box.label(text="1. Where it cannot lie flat", icon="SHADING_SOLID")
-    box.prop(s, "smoothing_mm", text="Smoothing (mm)")
-    box.prop(s, "color_by")
-    op = box.operator("bolus.saliency_preview", icon="COLOR")
-    op.smoothing_mm = s.smoothing_mm
-    op.color_by = s.color_by
+def wrapped_label(layout, text: str, width: int, icon: str = "NONE") -> None:
+    """text on as many label lines as the sidebar's width needs (labels do not wrap themselves)."""
+    for i, line in enumerate(textwrap.wrap(text, width) or [""]):
+        layout.label(text=line, icon=icon if i == 0 else "BLANK1")
+
+
+def text_width(context) -> int:
+    """About how many characters a label line of the sidebar holds (44 headless)."""
+    region = getattr(context, "region", None)
+    if region is None or not getattr(region, "width", 0):
+        return 44
+    scale = context.preferences.system.ui_scale if context.preferences else 1.0
+    return max(20, int(region.width / (7.0 * scale)))
+
+
+def size_warning(obj, mm: float) -> str | None:
+    """mesh_io.size_warning on the active object's bounding box (dimensions, world scale included)."""
+    if obj is None or obj.type != "MESH":
+        return None
+    dims = np.array(obj.dimensions, dtype=np.float64) * mm
+    return mesh_io.size_warning(np.array([np.zeros(3), dims]), mm)
+
+
+def smooth_cuts_done(obj) -> bool:
+    """Smooth Cut Lines has run on obj (on an improved surface: on its source), or there is no
+    border to smooth (one patch)."""
+    if guide.is_improved(obj):
+        obj = bpy.data.objects.get(obj.get("bolus_source", ""), obj)
+    if PROP_CUT_TABLE in obj:
+        return True
+    t = mesh_io.json_prop(obj, PROP_PATCH_TABLE)
+    return isinstance(t, dict) and (bool(t.get("smooth_cuts")) or len(t.get("patches", [])) <= 1)
+
+
+def next_step(context) -> tuple[str, set[str]]:
+    """(what to do next, the operators to highlight) from what the active object has."""
+    obj = context.active_object
+    if guide.needs_mesh(context):
+        return "Select the skin surface mesh (an STL imported in mm)", set()
+    if guide.is_pattern(obj):
+        return "6a Export the pattern (SVG, DXF or PDF)", {"bolus.export_pattern"}
+    if is_bolus_object(obj):
+        if ATTR_PRINT_PART not in obj.data.attributes:
+            return "6b Split into Print Parts", {"bolus.print_segment"}
+        if not part_objects(obj.name):
+            return "6b Orient Print Parts", {"bolus.orient_parts"}
+        return "6b Export Print Parts (STL)", {"bolus.export_parts"}
+    b = guide.bolus_for(obj)
+    if b is not None and obj.get(PROP_PART_SOURCE) == b.name:  # a print part
+        return "6b Export Print Parts (STL)", {"bolus.export_parts"}
+    if guide.pattern_of(obj) is not None:
+        return "6a Export the pattern (or 6b Make Bolus)", {"bolus.export_pattern"}
+    if b is not None:
+        return f"6b Select '{b.name}', then Split into Print Parts", set()
+    if guide.has_patches(obj):
+        if smooth_cuts_done(obj):
+            return "6a Unfold Patches or 6b Make Bolus", {"bolus.unfold", "bolus.make_shell"}
+        return "4 Smooth Cut Lines", {"bolus.smooth_cuts"}
+    if guide.has_preview(obj):
+        return "3 Segment into Patches", {"bolus.segment"}
+    if obj.mode == "EDIT" and obj.data.total_face_sel > 0:
+        return "2 Flattenability Preview of the selected faces", {"bolus.saliency_preview"}
+    return "1 Select Treatment Area (or select faces in Edit Mode)", {"bolus.select_area"}
+
+
+class Guide:
+    """What one draw of the panel needs: the context, the settings, the width, the next step."""
+
+    def __init__(self, context):
+        self.context = context
+        self.s = context.scene.bolus
+        self.obj = context.active_object
+        self.width = text_width(context)
+        self.next_text, self.next = next_step(context)
+        self.not_skin = guide.needs_skin(context)
+
+    def step(self, layout, key: str):
+        """A box with the step's number, title (an arrow when it holds the next step) and hint."""
+        number, title, icon, hint = STEPS[key]
+        box = layout.box()
+        is_next = any(STEP_OF[i] == key for i in self.next)
+        box.label(text=f"{number}  {title}", icon="FORWARD" if is_next else icon)
+        row = box.row()
+        row.scale_y = 0.8
+        row.label(text=hint)
+        return box
+
+    def gate(self, layout, why: str | None):
+        """A column greyed when ``why`` (the reason, shown above it as a label) says the input is missing."""
+        if why:
+            wrapped_label(layout, why, self.width, icon="INFO")
+        col = layout.column()
+        col.enabled = not why
+        return col
+
+    def gate_op(self, layout, idname: str, skin: bool = False):
+        """`gate` with the operator's poll reason; ``skin``: a step on the skin, greyed on a made object."""
+        why = guide.reason(idname, self.context)
+        if why is None and skin:
+            why = self.not_skin
+        return self.gate(layout, why)
+
+    def button(self, layout, idname: str, text: str | None = None, icon: str = "NONE"):
+        """The operator's button with the scene's settings; the next step's larger and pressed."""
+        row = layout.row(align=True)
+        is_next = idname in self.next
+        if is_next:
+            row.scale_y = 1.5
+        kw = {"icon": icon, "depress": is_next}
+        if text is not None:
+            kw["text"] = text
+        op = row.operator(idname, **kw)
+        set_settings(op, idname, self.s)
+        return op
+
+
+def draw_head(layout, g: Guide) -> None:
+    """The unit, a red warning when the active object's size says it is wrong, the intended use, the next step."""
+    mm = mesh_io.mm_per_unit(g.context.scene)
+    col = layout.column(align=True)
+    col.label(text=f"1 unit = {mm:g} mm; every figure is in mm", icon="DRIVER_DISTANCE")
+    warn = size_warning(g.obj, mm)
+    if warn:
+        red = col.column(align=True)
+        red.alert = True
+        wrapped_label(red, warn, g.width, icon="ERROR")
+    wrapped_label(col, DISCLAIMER, g.width, icon="INFO")
+    row = layout.row()
+    row.label(text="Next: " + g.next_text, icon="FORWARD")
+
+
+def draw_area(layout, g: Guide) -> None:
+    box = g.step(layout, "area")
+    col = g.gate_op(box, "bolus.select_area", skin=True)
+    row = col.row(align=True)
+    row.prop(g.s, "area_radius_mm", text="Radius (mm)")
+    row.prop(g.s, "exclude_cavities")
+    g.button(col, "bolus.select_area", icon="PIVOT_CURSOR")
+
+
+def draw_preview(layout, g: Guide) -> None:
+    box = g.step(layout, "preview")
+    col = g.gate_op(box, "bolus.saliency_preview", skin=True)
+    col.prop(g.s, "smoothing_mm", text="Smoothing (mm)")
+    col.prop(g.s, "color_by")
+    g.button(col, "bolus.saliency_preview", icon="COLOR")
+    obj = g.obj
     if obj is not None and PROP_SUM_VARPI in obj:
         box.label(text=f"Σϖ = {obj[PROP_SUM_VARPI]:.3f} rad   FLV = {obj[PROP_FLV]:.3g}")
 
-def draw_patches(box, s, obj):
-    box.label(text="2. Patches", icon="MOD_EXPLODE")
-    col = box.column(align=True)
-    col.prop(s, "patches")
-    col.prop(s, "eta")
-    col.prop(s, "seed")
-    box.prop(s, "method")
-    op = box.operator("bolus.segment", icon="MESH_ICOSPHERE")
-    op.patches, op.eta, op.seed, op.smoothing_mm, op.method = s.patches, s.eta, s.seed, s.smoothing_mm, s.method
-    table = mesh_io.json_prop(obj, PROP_PATCH_TABLE)
+
+def draw_segment(layout, g: Guide) -> None:
+    box = g.step(layout, "segment")
+    col = g.gate_op(box, "bolus.segment", skin=True)
+    sub = col.column(align=True)
+    sub.prop(g.s, "patches")
+    sub.prop(g.s, "eta")
+    sub.prop(g.s, "seed")
+    col.prop(g.s, "method")
+    g.button(col, "bolus.segment", icon="MESH_ICOSPHERE")
+    table = mesh_io.json_prop(g.obj, PROP_PATCH_TABLE)
     table = table.get("patches") if isinstance(table, dict) else None
     if table:
         draw_table(box, ("Patch", "Verts", "Tris", "Σϖ", "FLV"), (
             (str(r["patch"]), str(r["vertices"]), str(r["faces"]), f"{r['sum_varpi']:.2f}", f"{r['flv']:.3g}")
             for r in table))
-    box.operator("bolus.smooth_cuts", icon="IPO_EASE_IN_OUT")
-    cuts = mesh_io.json_prop(obj, PROP_CUT_TABLE)
+
+
+def draw_cuts(layout, g: Guide) -> None:
+    box = g.step(layout, "cuts")
+    col = g.gate_op(box, "bolus.smooth_cuts", skin=True)
+    g.button(col, "bolus.smooth_cuts", icon="IPO_EASE_IN_OUT")
+    cuts = mesh_io.json_prop(g.obj, PROP_CUT_TABLE)
     if cuts:
         draw_table(box, ("Border", "Cut", "Turn/mm", "Moved"), (
             (f"{r['a']}|{r['b']}", r["method"], f"{r['turning_before']:.2f}→{r['turning_after']:.2f}",
              f"{r['max_shift_mm']:.1f} mm") for r in cuts))
+
 
 def improved_of(obj):
     """The improved surface to show figures of: obj itself or its ``<name>_improved``."""
@@ -116,16 +313,16 @@ def _improve_row(name: str, st: dict) -> tuple:
             f"{st['area_mm2']:.0f}", f"{st['max_gap_mm']:.2f}")
 
 
-def draw_improve(box, s, obj):
+def draw_improve(layout, g: Guide) -> None:
     """The optional step between the patches and the pattern, and its Table 4-4 after a run."""
-    box.label(text="Improve flattenability (optional)", icon="MOD_SMOOTH")
-    row = box.row(align=True)
-    row.prop(s, "max_gap_mm", text="Max gap (mm)")
-    row.prop(s, "improve_method", text="")
-    box.prop(s, "seed")
-    op = box.operator("bolus.improve_flattenability", icon="MOD_SMOOTH")
-    op.max_gap_mm, op.method, op.seed = s.max_gap_mm, s.improve_method, s.seed
-    imp = improved_of(obj)
+    box = g.step(layout, "improve")
+    col = g.gate_op(box, "bolus.improve_flattenability", skin=True)
+    row = col.row(align=True)
+    row.prop(g.s, "max_gap_mm", text="Max gap (mm)")
+    row.prop(g.s, "improve_method", text="")
+    col.prop(g.s, "seed")
+    g.button(col, "bolus.improve_flattenability", icon="MOD_SMOOTH")
+    imp = improved_of(g.obj)
     t = mesh_io.json_prop(imp, PROP_IMPROVE_TABLE)
     if not isinstance(t, dict) or "whole" not in t:
         return
@@ -139,18 +336,18 @@ def draw_improve(box, s, obj):
     draw_table(box, ("", "FLV", "Σϖ", "max ϖ", "Smooth", "mm²", "Gap"), rows)
 
 
-def draw_pattern(box, s, obj):
-    box.label(text="3. Sheet pattern", icon="UV")
-    row = box.row(align=True)
+def draw_sheet(layout, g: Guide) -> None:
+    box = g.step(layout, "sheet")
+    s, obj = g.s, g.obj
+    col = g.gate_op(box, "bolus.unfold", skin=True)
+    row = col.row(align=True)
     row.prop(s, "max_el_pct", text="Max EL")
     row.prop(s, "sheet_thickness_mm", text="Sheet (mm)")
-    box.prop(s, "unfold_method")
-    row = box.row(align=True)
+    col.prop(s, "unfold_method")
+    row = col.row(align=True)
     row.prop(s, "refine")
     row.prop(s, "gap_mm", text="Gap (mm)")
-    op = box.operator("bolus.unfold", icon="MOD_UVPROJECT")
-    op.method, op.refine, op.gap_mm = s.unfold_method, s.refine, s.gap_mm
-    op.max_el, op.sheet_thickness_mm = s.max_el_pct, s.sheet_thickness_mm
+    g.button(col, "bolus.unfold", icon="MOD_UVPROJECT")
     pat = None
     if obj is not None:
         pat = obj if PROP_PATTERN_TABLE in obj else bpy.data.objects.get(obj.name + PATTERN_SUFFIX)
@@ -159,14 +356,16 @@ def draw_pattern(box, s, obj):
         box.label(text=f"{pat.name}: EL {t['EL'] * 100:.2f} %  EA {t['EA'] * 100:.2f} %")
         draw_pattern_table(box, t)
     box.prop(s, "warn_distortion_pct")
-    box.prop(s, "seam_allowance_mm", text="Seam allowance (mm)")
-    row = box.row(align=True)
+    col = g.gate_op(box, "bolus.export_pattern")
+    col.prop(s, "seam_allowance_mm", text="Seam allowance (mm)")
+    row = col.row(align=True)
     row.prop(s, "page", text="")
     row.prop(s, "label", text="ID")
-    row = box.row(align=True)
+    row = col.row(align=True)
     for fmt in ("SVG", "DXF", "PDF"):
-        op = row.operator("bolus.export_pattern", text=fmt, icon="EXPORT")
-        op.seam_allowance_mm, op.page, op.label, op.file_format = s.seam_allowance_mm, s.page, s.label, fmt
+        op = g.button(row, "bolus.export_pattern", text=fmt, icon="EXPORT")
+        op.file_format = fmt
+
 
 def bolus_of(obj):
     """The bolus solid to show figures of: obj itself, its ``<name>_bolus``, or the bolus a part came from."""
@@ -180,19 +379,20 @@ def bolus_of(obj):
     return bpy.data.objects.get(obj.name + BOLUS_SUFFIX)
 
 
-def draw_bolus(box, s, obj):
-    box.label(text="4. Printed bolus", icon="MOD_SOLIDIFY")
-    col = box.column(align=True)
-    col.prop(s, "thickness_mm", text="Thickness (mm)")
-    col.prop(s, "clearance_mm", text="Clearance (mm)")
-    col.prop(s, "resolution_mm", text="Resolution (mm)")
-    box.prop(s, "label")
-    row = box.row(align=True)
+def draw_print(layout, g: Guide) -> None:
+    """6b: Make Bolus and its figures, then (the bolus selected) split, orient, export the parts."""
+    box = g.step(layout, "print")
+    s, obj = g.s, g.obj
+    col = g.gate_op(box, "bolus.make_shell", skin=True)
+    sub = col.column(align=True)
+    sub.prop(s, "thickness_mm", text="Thickness (mm)")
+    sub.prop(s, "clearance_mm", text="Clearance (mm)")
+    sub.prop(s, "resolution_mm", text="Resolution (mm)")
+    col.prop(s, "label")
+    row = col.row(align=True)
     row.prop(s, "left_axis", text="Left")
     row.prop(s, "density_g_cm3", text="g/cm³")
-    op = box.operator("bolus.make_shell", icon="MOD_SOLIDIFY")
-    op.thickness_mm, op.clearance_mm, op.resolution_mm, op.label = (s.thickness_mm, s.clearance_mm,
-                                                                     s.resolution_mm, s.label)
+    g.button(col, "bolus.make_shell", icon="MOD_SOLIDIFY")
     b = bolus_of(obj)
     if b is not None and PROP_VOLUME in b:
         box.label(text=f"{b.name}: {b[PROP_VOLUME]:.1f} cm³, {b.get(PROP_MASS, 0.0):.0f} g")
@@ -203,7 +403,30 @@ def draw_bolus(box, s, obj):
             plain = sum(1 for j in joints if not j["connectors"])
             box.label(text=f"{len(joints)} joints, {sum(len(j['connectors']) for j in joints)} connectors"
                            + (f", {plain} plain" if plain else ""))
-    box.prop(s, "connector_clearance_mm", text="Connector clearance (mm)")
+    # split and orient: the operators take any surface (SPEC), the guide leads to the solid
+    col = g.gate(box, guide.needs_bolus_selected(g.context))
+    col.prop(s, "connector_clearance_mm", text="Connector clearance (mm)")
+    row = col.row(align=True)
+    row.prop(s, "parts")
+    row.prop(s, "print_method", text="")
+    g.button(col, "bolus.print_segment", icon="MOD_EXPLODE")
+    src = print_source(obj)
+    t = mesh_io.json_prop(src, PROP_PRINT_TABLE)
+    if t and "parts" in t:
+        box.label(text=f"{len(t['parts'])} parts, largest/smallest area {t['area_balance']:.2f}")
+    row = col.row(align=True)
+    row.prop(s, "layer_mm", text="Layer (mm)")
+    row.prop(s, "skin_side_up")
+    g.button(col, "bolus.orient_parts", icon="ORIENTATION_GIMBAL")
+    t = mesh_io.json_prop(src, PROP_ORIENT_TABLE)
+    if t:
+        draw_table(box, ("Part", "Tris", "WQ mm³", "WU mm³", "Support"), (
+            (r["part"], str(r["faces"]), f"{r['WQ']:.0f}", f"{r['WU']:.0f}", f"{r['support_volume_mm3']:.0f}")
+            for r in t["rows"]))
+        if t.get("support_ratio") is not None:
+            box.label(text=f"Parts' support: {t['support_ratio'] * 100:.0f} % of the whole model's")
+    col = g.gate_op(box, "bolus.export_parts")
+    g.button(col, "bolus.export_parts", icon="EXPORT")
 
 
 def print_source(obj):
@@ -215,32 +438,6 @@ def print_source(obj):
     return obj
 
 
-def draw_print(box, s, obj):
-    box.label(text="5. 3D print", icon="MOD_BUILD")
-    row = box.row(align=True)
-    row.prop(s, "parts")
-    row.prop(s, "print_method", text="")
-    op = box.operator("bolus.print_segment", icon="MOD_EXPLODE")
-    op.parts, op.method, op.seed = s.parts, s.print_method, s.seed
-    src = print_source(obj)
-    t = mesh_io.json_prop(src, PROP_PRINT_TABLE)
-    if t and "parts" in t:
-        box.label(text=f"{len(t['parts'])} parts, largest/smallest area {t['area_balance']:.2f}")
-    row = box.row(align=True)
-    row.prop(s, "layer_mm", text="Layer (mm)")
-    row.prop(s, "skin_side_up")
-    op = box.operator("bolus.orient_parts", icon="ORIENTATION_GIMBAL")
-    op.layer_mm, op.skin_side_up = s.layer_mm, s.skin_side_up
-    t = mesh_io.json_prop(src, PROP_ORIENT_TABLE)
-    if t:
-        draw_table(box, ("Part", "Tris", "WQ mm³", "WU mm³", "Support"), (
-            (r["part"], str(r["faces"]), f"{r['WQ']:.0f}", f"{r['WU']:.0f}", f"{r['support_volume_mm3']:.0f}")
-            for r in t["rows"]))
-        if t.get("support_ratio") is not None:
-            box.label(text=f"Parts' support: {t['support_ratio'] * 100:.0f} % of the whole model's")
-    box.operator("bolus.export_parts", icon="EXPORT")
-
-
 class VIEW3D_PT_bolus(bpy.types.Panel):
     bl_label = "Bolus"
     bl_idname = "VIEW3D_PT_bolus"
@@ -250,15 +447,45 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
+        g = Guide(context)
+        draw_head(layout, g)
+        for draw in (draw_area, draw_preview, draw_segment, draw_cuts, draw_improve, draw_sheet, draw_print):
+            draw(layout, g)
+
+
+class VIEW3D_MT_bolus(bpy.types.Menu):
+    """Every bolus operator in step order, under Object > Bolus and Mesh > Bolus (Edit Mode):
+    F3 (menu search) finds an operator only in a menu; greyed with the same reasons as the panel."""
+
+    bl_label = "Bolus"
+    bl_idname = "VIEW3D_MT_bolus"
+    #: the menus it is appended to (Object Mode, Edit Mode)
+    parents = ("VIEW3D_MT_object", "VIEW3D_MT_edit_mesh")
+
+    def draw(self, context):
+        layout = self.layout
         s = context.scene.bolus
-        obj = context.active_object
-        layout.label(text=f"1 unit = {mesh_io.mm_per_unit(context.scene):g} mm", icon="DRIVER_DISTANCE")
-        draw_saliency(layout.box(), s, obj)
-        draw_patches(layout.box(), s, obj)
-        draw_improve(layout.box(), s, obj)
-        draw_pattern(layout.box(), s, obj)
-        draw_bolus(layout.box(), s, obj)
-        draw_print(layout.box(), s, obj)
+        last = None
+        for idname in OP_SETTINGS:
+            if last is not None and STEP_OF[idname] != last:
+                layout.separator()
+            last = STEP_OF[idname]
+            set_settings(layout.operator(idname), idname, s)
+
+    @staticmethod
+    def draw_entry(self, context):
+        self.layout.separator()
+        self.layout.menu(VIEW3D_MT_bolus.bl_idname)
+
+    @classmethod
+    def register(cls):
+        for name in cls.parents:
+            getattr(bpy.types, name).append(cls.draw_entry)
+
+    @classmethod
+    def unregister(cls):
+        for name in cls.parents:
+            getattr(bpy.types, name).remove(cls.draw_entry)
 
 
-classes = (VIEW3D_PT_bolus,)
+classes = (VIEW3D_MT_bolus, VIEW3D_PT_bolus)

@@ -100,10 +100,16 @@ def export_path(filepath: str, file_format: str) -> str:
 
 
 class BOLUS_OT_export_pattern(BolusOperator, bpy.types.Operator):
-    """Write the pattern at true scale as SVG, DXF (mm, for a cutter) or PDF (tiled on A4 / Letter): one labelled outline per piece, numbered matching marks, a 50 mm test square"""
+    """Write the pattern at true scale as SVG, DXF (mm, for a cutter) or PDF (tiled on A4 / Letter): one labelled outline per piece, numbered matching marks, a 50 mm test square. Needs a pattern (Unfold Patches): select it or its skin"""
 
     bl_idname = "bolus.export_pattern"
     bl_label = "Export Pattern"
+
+    @classmethod
+    def poll(cls, context):
+        from .guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
+
+        return poll_for(cls, context)
     bl_options = {"REGISTER"}
 
     filepath: StringProperty(name="File", subtype="FILE_PATH", default="")

@@ -173,7 +173,7 @@ def build_pattern_object(context, job: _UnfoldJob) -> bpy.types.Object:
 
 
 class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
-    """Unfold every patch into a flat, true-scale pattern object (mass-spring with crossed springs, ch. 4.5), with darts and splits where a patch would exceed Max EL"""
+    """Unfold every patch into a flat, true-scale pattern object (mass-spring with crossed springs, ch. 4.5), with darts and splits where a patch would exceed Max EL. Needs a skin surface (its patches from Segment into Patches, else the region is one patch); makes a new object '<name>_pattern' and the piece table"""
 
     bl_idname = "bolus.unfold"
     bl_label = "Unfold Patches"
@@ -187,16 +187,10 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
     _job = None
 
     @classmethod
-    def poll(cls, context):
-        if not super().poll(context):
-            return False
-        obj = context.active_object
-        if is_pattern_object(obj):  # would make '<name>_pattern_pattern'
-            src = obj.get("bolus_source", obj.name.removesuffix(PATTERN_SUFFIX))
-            cls.poll_message_set(f"'{obj.name}' is a pattern made by Unfold: select its source '{src}' "
-                                 "and unfold that")
-            return False
-        return True
+    def poll(cls, context):  # not on a pattern (would make '<name>_pattern_pattern')
+        from .guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
+
+        return poll_for(cls, context)
 
     def run(self, context):
         job = _UnfoldJob(context, self.method, self.refine, self.gap_mm, self.max_el, self.sheet_thickness_mm,

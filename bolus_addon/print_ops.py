@@ -66,7 +66,7 @@ def _remove_parts(source_name: str) -> None:
 
 
 class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
-    """Split the bolus into parts of balanced area for 3D printing (area-balanced spectral cut, seed 6.2)"""
+    """Split the bolus into parts of balanced area for 3D printing (area-balanced spectral cut, seed 6.2). Needs the bolus made by Make Bolus, selected (a skin surface splits into open pieces); makes the face attribute bolus_print_part and, on a solid, flat joints with pegs and holes"""
 
     bl_idname = "bolus.print_segment"
     bl_label = "Split into Print Parts"
@@ -104,7 +104,7 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
 
 
 class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
-    """Make one object per print part, turned to its best print direction and resting on the plate (seed 6.1, 6.3)"""
+    """Make one object per print part, turned to its best print direction and resting on the plate (seed 6.1, 6.3). Needs print parts (Split into Print Parts; else the whole is one part); makes the '<name>_part_<i>' objects and the support table"""
 
     bl_idname = "bolus.orient_parts"
     bl_label = "Orient Print Parts"
@@ -204,10 +204,16 @@ def _at_origin(context, part: bpy.types.Object):
 
 
 class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
-    """Write every oriented print part as a binary STL file in millimetres"""
+    """Write every oriented print part as a binary STL file in millimetres. Needs the part objects (Orient Print Parts), the bolus or a part selected; writes one '<name>_part_<i>.stl' per part into the chosen folder"""
 
     bl_idname = "bolus.export_parts"
     bl_label = "Export Print Parts (STL)"
+
+    @classmethod
+    def poll(cls, context):
+        from .guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
+
+        return poll_for(cls, context)
 
     directory: StringProperty(name="Folder", subtype="DIR_PATH", default="")
 

@@ -122,7 +122,7 @@ def clear_bolus_props(obj) -> None:
 
 
 class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
-    """Make a printable bolus: a closed solid of the given thickness on the selected skin region (seed 1.1)"""
+    """Make a printable bolus: a closed solid of the given thickness on the selected skin region (seed 1.1). Needs a skin region at true size, not closed; makes a new object '<name>_bolus' with its volume, mass and wall figures, the skin unchanged"""
 
     bl_idname = "bolus.make_shell"
     bl_label = "Make Bolus"
@@ -133,15 +133,10 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
     label: label_property()
 
     @classmethod
-    def poll(cls, context):
-        if not super().poll(context):
-            return False
-        obj = context.active_object
-        if is_bolus_object(obj):  # would make '<name>_bolus_bolus'
-            cls.poll_message_set(f"'{obj.name}' is a bolus made by Make Bolus: select the skin it was made on "
-                                 f"('{obj.get(PROP_SOURCE, '?')}')")
-            return False
-        return True
+    def poll(cls, context):  # not on a bolus (would make '<name>_bolus_bolus')
+        from .guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
+
+        return poll_for(cls, context)
 
     def run(self, context):
         t0 = time.perf_counter()

@@ -29,11 +29,15 @@ class _Op:
 
 class RecordingLayout:
     """Records labels, props and operators; a label drawn where `alert` is on (set here or
-    on a parent layout, as in Blender) is recorded a second time as ("alert", text)."""
+    on a parent layout, as in Blender) is recorded a second time as ("alert", text); an
+    operator or prop drawn where `enabled` is off (here or on a parent) a second time as
+    ("disabled", idname or name); a pressed operator button (the next step) as ("next", idname)."""
 
     def __init__(self, bpy, log, parent=None):
         self.bpy, self.log, self.parent = bpy, log, parent
         self._alert = False
+        self._enabled = True
+        self.scale_y = 1.0
 
     @property
     def alert(self):
@@ -43,10 +47,21 @@ class RecordingLayout:
     def alert(self, value):
         self._alert = bool(value)
 
+    @property
+    def enabled(self):
+        return self._enabled and (self.parent is None or self.parent.enabled)
+
+    @enabled.setter
+    def enabled(self, value):
+        self._enabled = bool(value)
+
     def _child(self, *a, **k):
         return RecordingLayout(self.bpy, self.log, self)
 
     box = column = row = grid_flow = _child
+
+    def separator(self, **k):
+        pass
 
     def label(self, text="", **k):
         self.log.append(("label", text))
@@ -56,11 +71,20 @@ class RecordingLayout:
     def prop(self, data, name, **k):
         assert name in data.bl_rna.properties, f"{data} has no property {name!r}"
         self.log.append(("prop", name))
+        if not self.enabled:
+            self.log.append(("disabled", name))
 
     def operator(self, idname, **k):
         op = _Op(self.bpy, idname)
         self.log.append(("operator", idname))
+        if not self.enabled:
+            self.log.append(("disabled", idname))
+        if k.get("depress"):
+            self.log.append(("next", idname))
         return op
+
+    def menu(self, idname, **k):
+        self.log.append(("menu", idname))
 
 
 def draw_panel(bpy):
@@ -186,7 +210,7 @@ def test_panel_improve_section_and_its_table(bpy_addon, scene):
     V = V + np.random.default_rng(1).uniform(-0.3, 0.3, V.shape)  # scan-like noise to remove
     ob = make_object(bpy, V, F, scale_length=0.001)
     log = draw_panel(bpy)
-    i = log.index(("label", "Improve flattenability (optional)"))
+    i = log.index(("label", "5  Improve (optional)"))
     assert log.index(("operator", "bolus.segment")) < i < log.index(("operator", "bolus.unfold"))
     assert ("prop", "max_gap_mm") in log and ("prop", "improve_method") in log
     assert ("operator", "bolus.improve_flattenability") in log
