@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import cg, splu
+from scipy.sparse.linalg import splu
 
 from .errors import BolusError
 from .topology import MeshTopology, as_mesh_arrays, corner_angles, face_areas, refuse_zero_area, zero_area_mask
@@ -77,29 +77,33 @@ def flattenability_value(sum_varpi: float) -> float:
     return float(10.0 * 0.5 ** float(sum_varpi))
 
 
-def cotangent_stiffness(V: np.ndarray, F: np.ndarray) -> sp.csr_matrix:
+def cotangent_stiffness(V: np.ndarray, F: np.ndarray, topo: MeshTopology | None = None) -> sp.csr_matrix:
     """Cotangent stiffness matrix K (n,n), positive semi-definite, rows summing to 0.
 
     K_ij = -(cot a_ij + cot b_ij) / 2 for an edge ij with opposite angles a, b.
-    V (n,3), F (m,3).  A zero-area triangle has no cotangents: `BolusError` names it.
+    V (n,3), F (m,3); topo: the `MeshTopology` of (V, F) if the caller has it (its edge
+    list is reused).  A zero-area triangle has no cotangents: `BolusError` names it.
     """
-    V, F = as_mesh_arrays(V, F)
+    topo = MeshTopology(V, F) if topo is None else topo
+    V, F = topo.V, topo.F
     n = len(V)
-    cr = 2.0 * face_areas(V, F)
-    sides = np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2)
-    refuse_zero_area(F, zero_area_mask(0.5 * cr, sides.ravel()))
-    rows, cols, vals = [], [], []
+    cr = 2.0 * topo.areas
+    refuse_zero_area(F, topo.degenerate_faces())
+    # One weight per edge (bincount over the half-edges), then one CSR build of the
+    # 2e off-diagonal + n diagonal entries without duplicates: at 1.12M triangles
+    # 1.2 s instead of 4.3 s for the (6m-entry COO -> CSR, then K - diag(K 1)) build.
+    fe = topo.face_edges
+    w = np.zeros(len(topo.edges))
     for k in range(3):
-        i, j, o = F[:, (k + 1) % 3], F[:, (k + 2) % 3], F[:, k]
-        u, w = V[i] - V[o], V[j] - V[o]
-        cot = np.einsum("ij,ij->i", u, w) / cr
-        rows += [i, j]
-        cols += [j, i]
-        vals += [-0.5 * cot, -0.5 * cot]
-    rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
-    K = sp.coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsr()
-    K = K - sp.diags(np.asarray(K.sum(axis=1)).ravel())
-    return K.tocsr()
+        o, i, j = F[:, k], F[:, (k + 1) % 3], F[:, (k + 2) % 3]
+        cot = np.einsum("ij,ij->i", V[i] - V[o], V[j] - V[o]) / cr
+        w += np.bincount(fe[:, (k + 1) % 3], weights=cot, minlength=len(w))
+    w *= -0.5
+    E = topo.edges
+    diag = -(np.bincount(E[:, 0], weights=w, minlength=n) + np.bincount(E[:, 1], weights=w, minlength=n))
+    idx = np.arange(n)
+    K = sp.csr_matrix((np.r_[w, w, diag], (np.r_[E[:, 0], E[:, 1], idx], np.r_[E[:, 1], E[:, 0], idx])), shape=(n, n))
+    return K
 
 
 def lumped_mass(V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -125,7 +129,7 @@ def smooth_for_analysis(topo: MeshTopology, smoothing_mm: float) -> np.ndarray:
     if smoothing_mm == 0 or topo.m == 0:
         return V.copy()
     t = 0.5 * float(smoothing_mm) ** 2
-    K = cotangent_stiffness(V, F)
+    K = cotangent_stiffness(V, F, topo)
     M = lumped_mass(V, F)
     fixed = ~topo.interior_vertices
     free = np.nonzero(~fixed)[0]
@@ -133,19 +137,52 @@ def smooth_for_analysis(topo: MeshTopology, smoothing_mm: float) -> np.ndarray:
     if len(free) == 0:
         return out
     A = (sp.diags(M) + t * K).tocsr()
-    A_ff = A[free][:, free]
-    rhs = M[free, None] * V[free] - A[free][:, np.nonzero(fixed)[0]] @ V[fixed]
+    if len(free) == topo.n:  # a closed surface: nothing held (no slicing copies)
+        A_ff, rhs = A, M[:, None] * V
+    else:
+        A_ff = A[free][:, free]
+        rhs = M[free, None] * V[free] - A[free][:, np.nonzero(fixed)[0]] @ V[fixed]
     # A_ff is symmetric positive definite: conjugate gradients with a Jacobi
-    # preconditioner, started from the input positions, converge in a few dozen
-    # iterations; a direct factorisation is the fallback.
-    Pinv = sp.diags(1.0 / A_ff.diagonal())
-    for c in range(3):
-        x, info = cg(A_ff, rhs[:, c], x0=V[free, c], rtol=1e-12, atol=0.0, maxiter=2000, M=Pinv)
-        if info != 0:
-            out[free] = splu(A_ff.tocsc()).solve(rhs)
-            break
-        out[free, c] = x
+    # preconditioner, started from the input positions; the three coordinates are
+    # iterated together (`_pcg_columns`: one sparse product with an (n,3) block per
+    # iteration instead of three): at 1.12M triangles 3 x ~180 iterations took 14.9 s
+    # as three scipy `cg` calls, 5.1 s as one block.  A direct factorisation is the
+    # fallback should CG not converge.
+    x, ok = _pcg_columns(A_ff, rhs, V[free], rtol=1e-12, maxiter=2000)
+    out[free] = x if ok else splu(A_ff.tocsc()).solve(rhs)
     return out
+
+
+def _pcg_columns(A: sp.csr_matrix, B: np.ndarray, X0: np.ndarray, rtol: float, maxiter: int) -> tuple[np.ndarray, bool]:
+    """Jacobi-preconditioned conjugate gradients on the columns of B (n,c) at once.
+
+    Each column runs its own CG (own step lengths; the same iterates as
+    `scipy.sparse.linalg.cg(A, B[:, j], x0=X0[:, j], M=diag(A)^-1)`), stopping at
+    |r_j| <= rtol |b_j|; the work per iteration is one product A @ P (n,c).  A (n,n)
+    symmetric positive definite.  Returns (X (n,c), converged)."""
+    X = np.array(X0, dtype=np.float64, order="C", copy=True)
+    dinv = (1.0 / A.diagonal())[:, None]
+    R = B - A @ X
+    tol = rtol * np.linalg.norm(B, axis=0)
+    active = np.linalg.norm(R, axis=0) > tol
+    Z = R * dinv
+    P = Z.copy()
+    rz = np.einsum("ij,ij->j", R, Z)
+    for _ in range(maxiter):
+        if not active.any():
+            return X, True
+        AP = A @ P
+        pap = np.einsum("ij,ij->j", P, AP)
+        alpha = np.where(active, rz / np.where(pap > 0, pap, 1.0), 0.0)
+        X += alpha * P
+        R -= alpha * AP
+        active &= np.linalg.norm(R, axis=0) > tol
+        Z = R * dinv
+        rz_new = np.einsum("ij,ij->j", R, Z)
+        beta = np.where(active, rz_new / np.where(rz > 0, rz, 1.0), 0.0)
+        P = Z + beta * P
+        rz = rz_new
+    return X, not active.any()
 
 
 @dataclass
