@@ -141,6 +141,7 @@ def read_region(context, obj: bpy.types.Object | None = None, polys: np.ndarray 
         warnings.append(units)
     if not selection_only and polys is None:
         warnings += _loose_warnings(me, len(vert_ids))
+    warnings += modifier_warnings(obj)
     return Region(
         obj=obj,
         V=V,
@@ -153,6 +154,16 @@ def read_region(context, obj: bpy.types.Object | None = None, polys: np.ndarray 
         warnings=warnings,
         tri_index=np.nonzero(keep)[0],
     )
+
+
+def modifier_warnings(obj: bpy.types.Object) -> list[str]:
+    """A warning when the object shows modifiers: the bolus tools read its mesh data, without them."""
+    mods = [m.name for m in obj.modifiers if m.show_viewport]
+    if not mods:
+        return []
+    return [f"'{obj.name}' has {len(mods)} modifier(s) ({', '.join(mods)}) that the bolus tools do not see: they "
+            "work on the mesh as it is without them (as in Edit Mode); to use the shape shown, apply them first "
+            "(Object > Apply > Visual Geometry to Mesh)"]
 
 
 def _loose_warnings(me: bpy.types.Mesh, used_vertices: int) -> list[str]:

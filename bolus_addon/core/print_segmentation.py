@@ -211,7 +211,7 @@ def print_segmentation(
     faces = topo.m if face_groups is None else len(np.unique(face_groups))
     if faces < k:
         raise BolusError(f"the mesh has {faces} {'faces' if face_groups is not None else 'triangles'}, "
-                         f"fewer than the {k} parts asked")
+                         f"fewer than the {k} parts asked: ask for at most {faces} or select a larger region")
     total = float(topo.areas.sum())
     if not total > 0:
         raise BolusError("the mesh has zero area (all its faces are degenerate); check the mesh")

@@ -316,14 +316,22 @@ def _check_segment_request(topo: MeshTopology, patches, face_groups) -> int:
         raise BolusError(f"ask for at least 1 patch, got {patches}")
     nfaces = len(np.unique(face_groups)) if face_groups is not None else topo.m
     if nfaces < k:
-        raise BolusError(f"the region has {nfaces} faces, fewer than the {k} patches asked")
+        raise BolusError(f"the region has {nfaces} faces, fewer than the {k} patches asked: ask for at most "
+                         f"{nfaces} or select a larger region")
     if topo.n < k:
         raise BolusError(f"the region has {topo.n} vertices, too few for the {k} patches asked")
     if not topo.used_vertices.all():
         raise BolusError("the mesh has vertices that belong to no face (loose vertices)")
-    ncomp, _ = topo.face_components()
+    ncomp, comp = topo.face_components()
     if ncomp > 1:
-        raise BolusError(f"the region is made of {ncomp} separate parts; segment one connected part at a time")
+        if face_groups is None:
+            sizes, unit = np.bincount(comp), "triangles"
+        else:  # polygons, as the user sees them
+            sizes, unit = np.bincount(np.unique(np.c_[comp, face_groups], axis=0)[:, 0]), "faces"
+        raise BolusError(f"the region is made of {ncomp} separate parts ({', '.join(map(str, sorted(sizes)[::-1][:5]))}"
+                         f"{', ...' if ncomp > 5 else ''} {unit}); segment one connected part at a time (select its "
+                         "faces in Edit Mode: L over it), or, where the parts should be one surface, join them at "
+                         "their duplicated vertices first (Mesh > Clean Up > Merge by Distance)")
     return k
 
 

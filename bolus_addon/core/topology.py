@@ -471,8 +471,9 @@ class MeshTopology:
             where = f"{nmv} non-manifold vertices (e.g. vertex {int(ids[np.argmax(self.vertex_fan_count > 1)])})"
         if not allow_nonmanifold:
             raise BolusError(
-                f"{what[0].upper() + what[1:]} has {where}; a bolus must be a manifold surface "
-                "(find them with Select > Select All by Trait > Non Manifold)"
+                f"{what[0].upper() + what[1:]} has {where}; a bolus must be a manifold surface: find them with "
+                "Select > Select All by Trait > Non Manifold and delete the extra faces there (an edge may border "
+                "two faces, a vertex one fan of faces), or select only the faces to work on"
             )
         return [f"{where}: their vertices are treated like boundary vertices (flattenability 0)"]
 
