@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import bpy
 import numpy as np
@@ -53,10 +54,18 @@ class BOLUS_OT_saliency_preview(BolusOperator, bpy.types.Operator):
     smoothing_mm: smoothing_property()
     color_by: color_by_property()
 
-    def run(self, context):
+    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    def prepare(self, context):
         region, topo, warnings = self.read_region(context, allow_nonmanifold=True)
-        self.progress(0.2, "angle sums and saliency")
-        res = analyse(region.V, region.F, self.smoothing_mm, topo=topo)
+        return SimpleNamespace(region=region, topo=topo, warnings=warnings, smoothing_mm=float(self.smoothing_mm))
+
+    @staticmethod
+    def compute(job, progress):
+        progress(0.2, "angle sums and saliency")
+        return analyse(job.region.V, job.region.F, job.smoothing_mm, topo=job.topo)
+
+    def finish(self, context, job, res):
+        region, warnings = job.region, job.warnings
         self.progress(0.8, "writing attributes")
         obj, me = region.obj, region.mesh
         varpi = region.on_vertices(res.varpi, 0.0)
@@ -106,20 +115,31 @@ class BOLUS_OT_segment(BolusOperator, bpy.types.Operator):
     smoothing_mm: smoothing_property()
     method: method_property()
 
-    def run(self, context):
+    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    def prepare(self, context):
         region, topo, warnings = self.read_region(context, allow_nonmanifold=False)
-        seg = segment(
+        return SimpleNamespace(region=region, topo=topo, warnings=warnings, patches=int(self.patches),
+                               eta=float(self.eta), smoothing_mm=float(self.smoothing_mm), seed=int(self.seed),
+                               method=self.method.lower())
+
+    @staticmethod
+    def compute(job, progress):
+        region = job.region
+        return segment(
             region.V,
             region.F,
-            patches=self.patches,
-            eta=self.eta,
-            smoothing_mm=self.smoothing_mm,
-            rng=self.seed,
-            method=self.method.lower(),
+            patches=job.patches,
+            eta=job.eta,
+            smoothing_mm=job.smoothing_mm,
+            rng=job.seed,
+            method=job.method,
             face_groups=region.tri_poly,
-            progress=lambda f, t: self.progress(0.9 * f, t),
-            topo=topo,
+            progress=lambda f, t: progress(0.9 * f, t),
+            topo=job.topo,
         )
+
+    def finish(self, context, job, seg):
+        region, warnings = job.region, job.warnings
         obj, me = region.obj, region.mesh
         poly_labels = region.on_polygons(seg.face_labels.astype(np.int64), -1)
         seams = mesh_io.polygon_edge_labels(me, poly_labels)

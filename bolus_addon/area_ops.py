@@ -8,6 +8,8 @@ refusal changes nothing; one undo step undoes it all.
 """
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import bpy
 import numpy as np
 
@@ -30,7 +32,8 @@ class BOLUS_OT_select_area(BolusOperator, bpy.types.Operator):
     radius_mm: area_radius_property()
     exclude_cavities: exclude_cavities_property()
 
-    def run(self, context):
+    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    def prepare(self, context):
         obj = mesh_io.active_mesh_object(context)
         me = obj.data
         if me.shape_keys is not None:
@@ -40,8 +43,16 @@ class BOLUS_OT_select_area(BolusOperator, bpy.types.Operator):
             raise BolusError(f"'{obj.name}' has no faces: the bolus tools need a surface mesh")
         region = mesh_io.read_region(context, obj, polys=np.ones(len(me.polygons), dtype=bool))
         cursor = np.array(context.scene.cursor.location, dtype=np.float64) * region.mm_per_unit
-        area = treatment_area(region.V, region.F, cursor, self.radius_mm, self.exclude_cavities,
-                              progress=lambda f, t: self.progress(0.9 * f, t))
+        return SimpleNamespace(obj=obj, region=region, cursor=cursor, radius_mm=float(self.radius_mm),
+                               exclude_cavities=bool(self.exclude_cavities))
+
+    @staticmethod
+    def compute(job, progress):
+        return treatment_area(job.region.V, job.region.F, job.cursor, job.radius_mm, job.exclude_cavities,
+                              progress=lambda f, t: progress(0.9 * f, t))
+
+    def finish(self, context, job, area):
+        obj, region, cursor = job.obj, job.region, job.cursor
         self.progress(0.9, "writing the cut")
         _write_area(context, obj, region, area)
         table = {

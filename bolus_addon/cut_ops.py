@@ -9,6 +9,7 @@ before the mesh is touched; undo restores the mesh exactly.
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import bpy
 import numpy as np
@@ -45,7 +46,8 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
 
         return poll_for(cls, context)
 
-    def run(self, context):
+    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    def prepare(self, context):
         obj, region, labels = _read_patches(context)
         checked, why = cut_region_check(region.V, region.F, labels, region.vert_ids)  # on the patch faces only
         warnings = region.warnings + checked
@@ -57,8 +59,25 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
         table = mesh_io.json_prop(obj, PROP_PATCH_TABLE)
         table = table if isinstance(table, dict) else {}
         smoothing = float(table.get("smoothing_mm", 0.0) or 0.0)
-        self.progress(0.05, "smooth cut lines")
-        res = smooth_cuts(region.V, region.F, labels, progress=lambda f, t: self.progress(0.05 + 0.75 * f, t))
+        return SimpleNamespace(obj=obj, region=region, labels=labels, warnings=warnings, table=table,
+                               smoothing=smoothing)
+
+    @staticmethod
+    def compute(job, progress):
+        """(SmoothCutResult, patch table before, after); the tables None when nothing changed."""
+        region, labels = job.region, job.labels
+        progress(0.05, "smooth cut lines")
+        res = smooth_cuts(region.V, region.F, labels, progress=lambda f, t: progress(0.05 + 0.75 * f, t))
+        if not res.changed:
+            return res, None, None
+        progress(0.8, "patch figures")
+        before = patch_table(region.V, region.F, labels, job.smoothing)
+        after = patch_table(res.V, res.F, res.labels, job.smoothing)
+        return res, before, after
+
+    def finish(self, context, job, result):
+        obj, region, warnings, table = job.obj, job.region, job.warnings, job.table
+        res, before, after = result
         borders = [b.as_dict() for b in res.borders]
         if not res.changed:
             self.warn_all(warnings)
@@ -67,9 +86,6 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
             for r in borders:
                 self.report({"INFO"}, format_cut_row(r))
             return {"FINISHED"}
-        self.progress(0.8, "patch figures")
-        before = patch_table(region.V, region.F, labels, smoothing)
-        after = patch_table(res.V, res.F, res.labels, smoothing)
         _write_cuts(obj, region, res)
         table.update({"patches": after, "before_smooth_cuts": before, "smooth_cuts": True})
         obj[PROP_PATCH_TABLE] = json.dumps(table)

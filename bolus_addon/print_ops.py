@@ -13,6 +13,7 @@ import json
 import os
 import re
 from contextlib import contextmanager
+from types import SimpleNamespace
 
 import bpy
 import numpy as np
@@ -75,16 +76,34 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
     method: print_method_property()
     seed: seed_property()
 
-    def run(self, context):
+    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    def prepare(self, context):
         from . import solid_print_ops  # noqa: PLC0415 (it imports this module)
 
         if solid_print_ops.is_bolus_object(context.active_object):  # a solid from make_shell: cut into solid parts
-            return solid_print_ops.print_segment_solid(self, context)
+            return solid_print_ops.prepare_solid(self, context)
         region, topo, warnings = self.read_region(context, allow_nonmanifold=True)
-        seg = print_segmentation(
-            region.V, region.F, self.parts, method=self.method.lower(), rng=self.seed, topo=topo,
-            face_groups=region.tri_poly, progress=lambda f, t: self.progress(0.9 * f, t),
+        return SimpleNamespace(solid=False, region=region, topo=topo, warnings=warnings, parts=int(self.parts),
+                               method=self.method.lower(), seed=int(self.seed))
+
+    @staticmethod
+    def compute(job, progress):
+        from . import solid_print_ops  # noqa: PLC0415 (it imports this module)
+
+        if job.solid:
+            return solid_print_ops.compute_solid(job, progress)
+        region = job.region
+        return print_segmentation(
+            region.V, region.F, job.parts, method=job.method, rng=job.seed, topo=job.topo,
+            face_groups=region.tri_poly, progress=lambda f, t: progress(0.9 * f, t),
         )
+
+    def finish(self, context, job, seg):
+        from . import solid_print_ops  # noqa: PLC0415 (it imports this module)
+
+        if job.solid:
+            return solid_print_ops.finish_solid(self, context, job, seg)
+        region, topo, warnings = job.region, job.topo, job.warnings
         obj, me = region.obj, region.mesh
         poly_labels = region.on_polygons(np.asarray(seg.labels, dtype=np.int64), -1)  # a polygon's triangles share a part
         with mesh_io.object_mode(obj):
@@ -112,7 +131,8 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
     layer_mm: layer_property()
     skin_side_up: skin_side_up_property()
 
-    def run(self, context):
+    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    def prepare(self, context):
         from . import solid_print_ops  # noqa: PLC0415 (it imports this module)
 
         region, topo, warnings = solid_print_ops.read_parts_region(self, context)
@@ -128,9 +148,21 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
         tri_labels = poly_labels[region.tri_poly]
         if not (tri_labels >= 0).any():
             raise BolusError("none of the region's faces belongs to a print part: run Split into Print Parts first")
-        plan = orient_print_parts(region.V, region.F, tri_labels, h=self.layer_mm, topo=topo,
-                                  progress=lambda f, t: self.progress(0.9 * f, t),
-                                  **solid_print_ops.orient_options(region, tri_labels, self.skin_side_up))
+        return SimpleNamespace(region=region, topo=topo, warnings=warnings, tri_labels=tri_labels,
+                               layer_mm=float(self.layer_mm),
+                               options=solid_print_ops.orient_options(region, tri_labels, self.skin_side_up))
+
+    @staticmethod
+    def compute(job, progress):
+        region = job.region
+        return orient_print_parts(region.V, region.F, job.tri_labels, h=job.layer_mm, topo=job.topo,
+                                  progress=lambda f, t: progress(0.9 * f, t), **job.options)
+
+    def finish(self, context, job, plan):
+        from . import solid_print_ops  # noqa: PLC0415 (it imports this module)
+
+        region, topo, warnings, tri_labels = job.region, job.topo, job.warnings, job.tri_labels
+        obj = region.obj
         closed_info, closed_warn = solid_print_ops.closed_lines(region, tri_labels)  # solids only
         self.progress(0.9, "part objects")
         self._make_part_objects(context, region, tri_labels, plan)

@@ -17,6 +17,7 @@ computation succeeded, and removed again if writing it fails.
 from __future__ import annotations
 
 import time
+from types import SimpleNamespace
 
 import bpy
 import numpy as np
@@ -98,11 +99,15 @@ def label_outlines(label: str, part_count: int | None = None) -> dict:
 
 def engrave(context, V, F, side, label: str, part_labels=None):
     """`core.engrave.engrave_labels` with outlines from Blender's font -> (V, F, side, part labels, warnings)."""
+    parts = None if part_labels is None else int(np.max(part_labels)) + 1
+    return engrave_with(V, F, side, label_outlines(label, parts), label, left_vector(context), part_labels)
+
+
+def engrave_with(V, F, side, outlines: dict, label: str, left, part_labels=None):
+    """`engrave` with the outlines and the left vector read beforehand (bpy-free: a worker thread's)."""
     from .core.engrave import engrave_labels  # noqa: PLC0415
 
-    parts = None if part_labels is None else int(np.max(part_labels)) + 1
-    return engrave_labels(V, F, side, label_outlines(label, parts), label, left_vector(context),
-                          part_labels=part_labels, return_labels=True)
+    return engrave_labels(V, F, side, outlines, label, left, part_labels=part_labels, return_labels=True)
 
 
 def remove_mesh(me) -> None:
@@ -138,7 +143,8 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
 
         return poll_for(cls, context)
 
-    def run(self, context):
+    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    def prepare(self, context):
         t0 = time.perf_counter()
         t, c, res = float(self.thickness_mm), float(self.clearance_mm), float(self.resolution_mm)
         check_shell_request(t, c, res)  # bad settings are refused before any work
@@ -153,17 +159,29 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
         check_shell_request(t, c, res, area_mm2=float(topo.areas.sum()))
         others = self._rest_of_skin(context, region)
         skin_F = _world_winding(region.obj, region.F)
-        shell = make_shell(region.V, skin_F, t, c, res, others=others,
-                           progress=lambda f, text: self.progress(0.85 * f, text))
-        V, F, side = shell.V, shell.F, np.asarray(shell.side)
         label = self.label.strip()
-        if label:
-            self.progress(0.87, "engraving the label")
-            V, F, side, _, notes = engrave(context, V, F, side, label)
-            warnings += list(notes)
+        return SimpleNamespace(t0=t0, t=t, c=c, res=res, region=region, warnings=warnings, others=others,
+                               skin_F=skin_F, label=label, outlines=label_outlines(label) if label else None,
+                               left=left_vector(context))
+
+    @staticmethod
+    def compute(job, progress):
+        """(shell, V, F, side after engraving, the engraving's notes, closed_report of the result)."""
+        shell = make_shell(job.region.V, job.skin_F, job.t, job.c, job.res, others=job.others,
+                           progress=lambda f, text: progress(0.85 * f, text))
+        V, F, side, notes = shell.V, shell.F, np.asarray(shell.side), []
+        if job.label:
+            progress(0.87, "engraving the label")
+            V, F, side, _, notes = engrave_with(V, F, side, job.outlines, job.label, job.left)
+        progress(0.95, "checking the bolus")
+        return shell, V, F, side, list(notes), closed_report(V, F)
+
+    def finish(self, context, job, result):
+        shell, V, F, side, notes, final = result
+        t, c, t0, region, skin_F, label = job.t, job.c, job.t0, job.region, job.skin_F, job.label
+        warnings = job.warnings + notes
         self.progress(0.95, "writing the bolus")
         density = float(getattr(getattr(context.scene, "bolus", None), "density_g_cm3", DEFAULT_DENSITY))
-        final = closed_report(V, F)
         if not final["closed"]:  # the core's solids are closed by construction: never write an open one
             raise BolusError(f"internal error: the bolus came out open ({final['boundary_edges']} open edges, "
                              f"{final['nonmanifold_edges']} non-manifold): nothing was made")

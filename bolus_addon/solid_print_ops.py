@@ -18,12 +18,14 @@ from __future__ import annotations
 
 import json
 import re
+from types import SimpleNamespace
 
 import bpy
 import numpy as np
 
 from . import mesh_io
 from .core.colormap import categorical_linear_rgba
+from .core.engrave import strings_needed
 from .core.errors import BolusError
 from .core.print_segmentation import print_segmentation
 from .core.solid import SIDE_INNER, closed_report
@@ -31,6 +33,9 @@ from .core.topology import MeshTopology
 from .shell_ops import (
     ATTR_SHELL_SIDE,
     PROP_LABEL,
+    engrave_with,
+    label_outlines,
+    left_vector,
     PROP_SKIN_MESH,
     PROP_SOLID_MESH,
     PROP_SOURCE,
@@ -96,29 +101,65 @@ def joint_lines(parts) -> list[str]:
 
 
 def print_segment_solid(op, context) -> set[str]:
-    """`print_segment` on a bolus solid (op: the BOLUS_OT_print_segment with parts, method, seed)."""
-    from .core.solid_parts import split_solid  # noqa: PLC0415
+    """`print_segment` on a bolus solid (op: the BOLUS_OT_print_segment with parts, method, seed):
+    `prepare_solid`, `compute_solid`, `finish_solid` in a row."""
+    job = prepare_solid(op, context)
+    return finish_solid(op, context, job, compute_solid(job, op.progress))
 
+
+def prepare_solid(op, context) -> SimpleNamespace:
+    """What `compute_solid` needs, read in the main thread: the stored skin and solid (mm), the
+    settings, and the label's outlines from Blender's font for up to the asked number of parts."""
     obj = mesh_io.active_mesh_object(context)
     mm = mesh_io.mm_per_unit(context.scene)
     settings = getattr(context.scene, "bolus", None)
     clearance = float(getattr(settings, "connector_clearance_mm", DEFAULT_CONNECTOR_CLEARANCE))
     skin_V, skin_F, V, F, side = stored_solid(obj, mm)
-    op.progress(0.0, "splitting the skin")
-    seg = print_segmentation(skin_V, skin_F, op.parts, method=op.method.lower(), rng=op.seed,
-                             progress=lambda f, t: op.progress(0.2 * f, t))
-    parts = split_solid(V, F, side, skin_V, skin_F, seg.labels, clearance=clearance,
-                        progress=lambda f, t: op.progress(0.2 + 0.6 * f, t))
+    label = str(obj.get(PROP_LABEL, ""))
+    # the parts may come out more than asked (a cluster that fell apart): outlines for a few extra numbers
+    outlines = label_outlines(label, int(op.parts) + 4) if label else None
+    return SimpleNamespace(solid=True, obj=obj, mm=mm, clearance=clearance, skin_V=skin_V, skin_F=skin_F, V=V, F=F,
+                           side=side, label=label, outlines=outlines, left=left_vector(context),
+                           parts=int(op.parts), method=op.method.lower(), seed=int(op.seed))
+
+
+def compute_solid(job, progress):
+    """bpy-free: the skin split, the solid cut with connectors, engraved; (seg, parts, PV, PF, pside,
+    plabels, warnings, closed reports)."""
+    from .core.solid_parts import split_solid  # noqa: PLC0415
+
+    progress(0.0, "splitting the skin")
+    seg = print_segmentation(job.skin_V, job.skin_F, job.parts, method=job.method, rng=job.seed,
+                             progress=lambda f, t: progress(0.2 * f, t))
+    parts = split_solid(job.V, job.F, job.side, job.skin_V, job.skin_F, seg.labels, clearance=job.clearance,
+                        progress=lambda f, t: progress(0.2 + 0.6 * f, t))
     PV, PF, pside, plabels = parts.V, parts.F, np.asarray(parts.side), np.asarray(parts.labels)
     warnings = [m for m in [seg.count_note()] if m] + list(parts.warnings)
-    label = str(obj.get(PROP_LABEL, ""))
-    if label:
-        op.progress(0.85, "engraving the labels")
-        PV, PF, pside, plabels, notes = engrave(context, PV, PF, pside, label, part_labels=plabels)
+    k = int(plabels.max()) + 1
+    if job.label and all(s in job.outlines for s in strings_needed(job.label, k)):
+        progress(0.85, "engraving the labels")
+        PV, PF, pside, plabels, notes = engrave_with(PV, PF, pside, job.outlines, job.label, job.left,
+                                                     part_labels=plabels)
         pside, plabels = np.asarray(pside), np.asarray(plabels)
         warnings += list(notes)
-    k = int(plabels.max()) + 1
-    closed = [closed_report(*_part_arrays(PV, PF, plabels == p)) for p in range(k)]
+        engraved = True
+    else:  # no label, or more parts than outlines read: finish_solid engraves (Blender's font, main thread)
+        engraved = not job.label
+    closed = [closed_report(*_part_arrays(PV, PF, plabels == p)) for p in range(k)] if engraved else None
+    return seg, parts, PV, PF, pside, plabels, warnings, closed
+
+
+def finish_solid(op, context, job, result) -> set[str]:
+    """The parts replace the bolus object's mesh (main thread), with the tables and reports."""
+    seg, parts, PV, PF, pside, plabels, warnings, closed = result
+    obj, mm, clearance, skin_V, skin_F = job.obj, job.mm, job.clearance, job.skin_V, job.skin_F
+    if closed is None:  # not engraved yet (see compute_solid)
+        op.progress(0.85, "engraving the labels")
+        PV, PF, pside, plabels, notes = engrave(context, PV, PF, pside, job.label, part_labels=plabels)
+        pside, plabels = np.asarray(pside), np.asarray(plabels)
+        warnings = warnings + list(notes)
+        closed = [closed_report(*_part_arrays(PV, PF, plabels == p)) for p in range(int(plabels.max()) + 1)]
+    k = len(closed)
     op.progress(0.95, "writing the parts")
     with mesh_io.object_mode(obj):
         me = tri_mesh(obj.name, PV / mm, PF)
