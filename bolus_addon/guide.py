@@ -176,22 +176,27 @@ def needs_bolus_selected(context) -> str | None:
     return "Make the bolus first (Make Bolus) or select a bolus object"
 
 
-def needs_skin(context) -> str | None:
-    """The panel's steps on the skin (1 to Unfold, Make Bolus): the active object is not a pattern, a
-    bolus or a print part.  Not an operator poll (those refuse what they must; see `NEEDS`): the guide
-    leads back to the skin."""
-    obj = context.active_object
+def made_object(obj) -> tuple[str, str] | None:
+    """(what obj is, the skin it comes from) for a pattern, a bolus or a print part; None for a skin
+    (an improved surface is a skin: Unfold and Make Bolus take it)."""
     if obj is None or obj.type != "MESH":
         return None
     if is_pattern(obj):
-        return f"'{obj.name}' is a pattern made by Unfold: select its source '{pattern_source_name(obj)}' for this step"
+        return "a pattern made by Unfold", pattern_source_name(obj)
     if is_bolus(obj):
-        return f"'{obj.name}' is a bolus: select the skin '{obj.get('bolus_source', '?')}' for this step"
+        return "a bolus made by Make Bolus", obj.get("bolus_source", "?")
     if "bolus_part" in obj:  # a print part (orient_parts)
         b = bolus_for(obj)
-        skin = b.get("bolus_source", "?") if b is not None else obj.get("bolus_source", "?")
-        return f"'{obj.name}' is a print part: select the skin '{skin}' for this step"
+        return "a print part", (b.get("bolus_source", "?") if b is not None else obj.get("bolus_source", "?"))
     return None
+
+
+def needs_skin(context) -> str | None:
+    """The panel's steps on the skin (1 to Unfold, Make Bolus): the active object is not a pattern, a
+    bolus or a print part.  Not an operator poll (those refuse what they must, see `NEEDS`): the guide
+    leads back to the skin."""
+    made = made_object(context.active_object)
+    return None if made is None else f"Select the skin '{made[1]}' for this step"
 
 
 def has_preview(obj) -> bool:

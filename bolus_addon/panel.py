@@ -46,15 +46,17 @@ OP_SETTINGS = {
     "bolus.export_parts": {},
 }
 
-#: (number, title, icon, one-line hint) of every step, in order
+#: (number, title, icon, hint: what it does and what it needs) of every step, in order
 STEPS = {
-    "area": ("1", "Select area", "PIVOT_CURSOR", "Faces around the 3D cursor, or select by hand"),
-    "preview": ("2", "Preview", "COLOR", "Colours where the skin cannot lie flat"),
-    "segment": ("3", "Segment", "MESH_ICOSPHERE", "Patches that flatten well"),
-    "cuts": ("4", "Smooth cuts", "IPO_EASE_IN_OUT", "Smooth patch borders (changes the mesh)"),
-    "improve": ("5", "Improve (optional)", "MOD_SMOOTH", "A flatter copy, at most Max gap off the skin"),
-    "sheet": ("6a", "Sheet pattern", "UV", "Unfold flat at true size, then export"),
-    "print": ("6b", "Printed bolus", "MOD_SOLIDIFY", "Solid, print parts, orient, export STL"),
+    "area": ("1", "Select area", "PIVOT_CURSOR", "Faces around the 3D cursor (needs: the skin, the cursor on it)"),
+    "preview": ("2", "Preview", "COLOR", "Where the skin cannot lie flat (needs: the skin)"),
+    "segment": ("3", "Segment", "MESH_ICOSPHERE", "Patches that flatten well (needs: the skin in one piece)"),
+    "cuts": ("4", "Smooth cuts", "IPO_EASE_IN_OUT", "Smooth patch borders, changes the mesh (needs: patches)"),
+    "improve": ("5", "Improve (optional)", "MOD_SMOOTH", "A flatter copy, at most Max gap off the skin "
+                                                         "(needs: the skin)"),
+    "sheet": ("6a", "Sheet pattern", "UV", "Flat pattern at true size, then export (needs: the skin, "
+                                          "best with patches)"),
+    "print": ("6b", "Printed bolus", "MOD_SOLIDIFY", "Solid, print parts, orient, export STL (needs: the skin)"),
 }
 #: the step each operator belongs to
 STEP_OF = {"bolus.select_area": "area", "bolus.saliency_preview": "preview", "bolus.segment": "segment",
@@ -202,9 +204,9 @@ class Guide:
         box = layout.box()
         is_next = any(STEP_OF[i] == key for i in self.next)
         box.label(text=f"{number}  {title}", icon="FORWARD" if is_next else icon)
-        row = box.row()
-        row.scale_y = 0.8
-        row.label(text=hint)
+        col = box.column(align=True)
+        col.scale_y = 0.8
+        wrapped_label(col, hint, self.width)
         return box
 
     def gate(self, layout, why: str | None):
@@ -216,10 +218,9 @@ class Guide:
         return col
 
     def gate_op(self, layout, idname: str, skin: bool = False):
-        """`gate` with the operator's poll reason; ``skin``: a step on the skin, greyed on a made object."""
-        why = guide.reason(idname, self.context)
-        if why is None and skin:
-            why = self.not_skin
+        """`gate` with the operator's poll reason; ``skin``: a step on the skin, greyed on a made
+        object (a pattern, a bolus, a part) with the way back to the skin instead."""
+        why = (self.not_skin if skin else None) or guide.reason(idname, self.context)
         return self.gate(layout, why)
 
     def button(self, layout, idname: str, text: str | None = None, icon: str = "NONE"):
@@ -247,8 +248,11 @@ def draw_head(layout, g: Guide) -> None:
         red.alert = True
         wrapped_label(red, warn, g.width, icon="ERROR")
     wrapped_label(col, DISCLAIMER, g.width, icon="INFO")
-    row = layout.row()
-    row.label(text="Next: " + g.next_text, icon="FORWARD")
+    made = guide.made_object(g.obj)
+    if made is not None:
+        wrapped_label(layout.column(align=True), f"'{g.obj.name}' is {made[0]}: the steps on the skin are "
+                      f"greyed (select '{made[1]}' for them)", g.width, icon="INFO")
+    wrapped_label(layout.column(align=True), "Next: " + g.next_text, g.width, icon="FORWARD")
 
 
 def draw_area(layout, g: Guide) -> None:

@@ -268,8 +268,9 @@ def test_panel_walks_a_whole_case(bpy_addon, scene):
     log, dis, nxt = panel_state(bpy)
     assert nxt == {"bolus.export_pattern"}
     assert dis == skin_steps | {"bolus.export_parts"} | print_ops  # only the export is left
-    assert shown(log, "'skin_pattern' is a pattern made by Unfold: select its source 'skin' and unfold that")
-    assert shown(log, "'skin_pattern' is a pattern made by Unfold: select its source 'skin' for this step")
+    assert shown(log, "'skin_pattern' is a pattern made by Unfold: the steps on the skin are greyed (select 'skin' "
+                      "for them)")
+    assert labels(log).count("Select the skin 'skin' for this step") == 7  # under each greyed skin step
     assert any(t.startswith("skin_pattern: EL") for t in labels(log))
     bpy.context.view_layer.objects.active = ob
 
@@ -283,8 +284,8 @@ def test_panel_walks_a_whole_case(bpy_addon, scene):
     bpy.context.view_layer.objects.active = bolus
     log, dis, nxt = panel_state(bpy)
     assert nxt == {"bolus.print_segment"} and dis == skin_steps | {"bolus.export_pattern", "bolus.export_parts"}
-    assert shown(log, "'skin_bolus' is a bolus: select the skin 'skin' for this step")
-    assert shown(log, "'skin_bolus' is a bolus made by Make Bolus: select the skin it was made on ('skin')")
+    assert shown(log, "'skin_bolus' is a bolus made by Make Bolus: the steps on the skin are greyed (select 'skin'")
+    assert labels(log).count("Select the skin 'skin' for this step") == 7
     assert any(t.startswith("skin_bolus: ") and t.endswith(" g") for t in labels(log))
     print("\n--- bolus selected\n" + sketch(log))
     assert bpy.ops.bolus.print_segment(parts=2) == {"FINISHED"}
@@ -298,7 +299,7 @@ def test_panel_walks_a_whole_case(bpy_addon, scene):
     bpy.context.view_layer.objects.active = bpy.data.objects["skin_bolus_part_0"]
     log, dis, nxt = panel_state(bpy)
     assert nxt == {"bolus.export_parts"} and dis == skin_steps | print_ops | {"bolus.export_pattern"}
-    assert shown(log, "'skin_bolus_part_0' is a print part: select the skin 'skin' for this step")
+    assert shown(log, "'skin_bolus_part_0' is a print part: the steps on the skin are greyed (select 'skin'")
     assert shown(log, "'skin_bolus_part_0' is a print part: select the bolus 'skin_bolus' to split it again")
 
 
