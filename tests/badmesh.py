@@ -20,7 +20,7 @@ What each case is (vertex / face indices are Blender's, as the messages name the
 - ``loose``: 3 loose vertices and 2 loose edges beside the dome
 - ``pieces``: three separate domes
 - ``one_triangle``: one triangle
-- ``flipped_normals``: the polygons of one half wound the other way
+- ``flipped_normals``: the polygons of the last 3 of 10 rows wound the other way (60 of 200 triangles)
 - ``modifiers``: a Subdivision + Displace stack on the dome (the operators read the mesh data,
   not the evaluated mesh: the result is that of the dome without its modifiers)
 - ``scale_nonuniform``, ``scale_negative``, ``rotated``: object transforms
@@ -154,7 +154,7 @@ def one_triangle():
 
 def flipped_normals():
     V, F = dome()
-    return (V, [f[::-1] if k >= quad_of(5, 0) else f for k, f in enumerate(F)]), []
+    return (V, [f[::-1] if k >= quad_of(7, 0) else f for k, f in enumerate(F)]), []  # 30 of 100 quads
 
 
 ARRAYS = {

@@ -122,6 +122,7 @@ def snap(ob) -> dict:
         "starts": _get(me.polygons, "loop_start", len(me.polygons), np.int64).copy(),
         "edges": _get(me.edges, "vertices", len(me.edges), np.int64, 2).copy(),
         "seams": _get(me.edges, "use_seam", len(me.edges), bool).copy(),
+        "selected": _get(me.polygons, "select", len(me.polygons), bool).copy(),
         "attrs": attrs,
         "props": props,
         "matrix": np.array(ob.matrix_world),
@@ -146,7 +147,7 @@ def diff(before: dict, after: dict, attrs=(), props=(), seams=False, topology=Fa
         if len(after["co"]) < n0 or not np.array_equal(after["co"][:n0], before["co"], equal_nan=True):
             out.append("vertex coordinates")
     else:
-        for k in ("co", "loops", "starts", "edges"):
+        for k in ("co", "loops", "starts", "edges", "selected"):
             if not _same(before[k], after[k]):
                 out.append(k)
         if not seams and not _same(before["seams"], after["seams"]):
@@ -239,7 +240,8 @@ def check_valid(bpy, op, ob, tmp_path, kw) -> None:
         # every island has a positive area (no island collapsed to a point or a line)
         tris = _tris(pat.data)
         P = co[tris][:, :, :2]
-        area = 0.5 * np.abs(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]))
+        a, b = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+        area = 0.5 * np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
         assert area.sum() > 0
     elif op == "export_pattern":
         path = tmp_path / "pattern.svg"
@@ -416,7 +418,8 @@ NO_PARTS = r"'skin' has no print parts yet: run Orient Print Parts first"
 NONMANIFOLD = (r"has 1 non-manifold edges \(e\.g\. between vertices {a} and {b}\); a bolus must be a manifold surface: "
                r"find them with Select > Select All by Trait > Non Manifold and delete the extra faces there")
 NONMANIFOLD_PATCH = (r"1 non-manifold edge\(s\) \(shared by more than two triangles\), e\.g\. the edge between "
-                     r"vertices {a} and {b}; Select > Select All by Trait > Non Manifold shows them")
+                     r"vertices {a} and {b}; Select > Select All by Trait > Non Manifold shows them: delete the extra "
+                     r"faces there")
 ZERO_AREA = (r"the region has 1 zero-area triangle\(s\), e\.g\. the triangle on vertices 0, {n1}, {n0}: coincident or "
              r"collinear vertices; merge them first \(Mesh > Clean Up > Merge by Distance, then Degenerate Dissolve\)")
 NAN = (rf"vertex {NAN_VERTEX} of 'skin' has an invalid coordinate \(-?[\d.]+, -?[\d.]+, nan\): a bolus needs finite "
@@ -431,31 +434,36 @@ _n = vid(10, 10) + 1  # the dome's vertex count: the sliver's vertices are the n
 EXPECT: dict[str, dict[str, str]] = {
     "nonmanifold_edge": {
         "segment": NONMANIFOLD.format(**_nm), "smooth_cuts": NO_PATCHES,
-        "improve_flattenability": NONMANIFOLD.format(**_nm), "unfold": "patch 0: the patch has " + NONMANIFOLD_PATCH.format(**_nm),
+        "improve_flattenability": NONMANIFOLD.format(**_nm),
+        "unfold": "patch 0: the patch has " + NONMANIFOLD_PATCH.format(**_nm),
         "export_pattern": NO_PATTERN, "make_shell": NONMANIFOLD.format(**_nm),
         "select_area": "the surface near the cursor has " + NONMANIFOLD_PATCH.format(**_nm),
     },
     "zero_area": {
-        **{op: ZERO_AREA.format(n0=_n, n1=_n + 1) for op in ("saliency_preview", "segment", "improve_flattenability",
-                                                                "unfold", "make_shell", "print_segment", "orient_parts")},
+        **{op: ZERO_AREA.format(n0=_n, n1=_n + 1)
+           for op in ("saliency_preview", "segment", "improve_flattenability", "unfold", "make_shell", "print_segment",
+                      "orient_parts")},
         "smooth_cuts": NO_PATCHES, "export_pattern": NO_PATTERN, "export_parts": NO_PARTS,
     },
     "duplicate_vertices": {"segment": PARTS.format(k=2, sizes="50, 50"), "smooth_cuts": NO_PATCHES},
     "pieces": {"segment": PARTS.format(k=3, sizes="36, 36, 25"), "smooth_cuts": NO_PATCHES},
     "one_triangle": {
-        "segment": r"the region has 1 faces, fewer than the 2 patches asked: ask for at most 1 or select a larger region",
+        "segment": r"the region has 1 faces, fewer than the 2 patches asked: ask for at most 1 or select a larger "
+                   r"region",
         "smooth_cuts": NO_PATCHES,
         "improve_flattenability": r"the region has no interior vertices: every vertex is on its border, which stays "
                                   r"fixed, so nothing can move \(select a larger area\)",
         "unfold": r"patch 0: the patch has 1 triangle\(s\); at least 3 are needed",
         "export_pattern": NO_PATTERN,
-        "print_segment": r"the mesh has 1 faces, fewer than the 2 parts asked: ask for at most 1 or select a larger region",
+        "print_segment": r"the mesh has 1 faces, fewer than the 2 parts asked: ask for at most 1 or select a larger "
+                         r"region",
     },
     "flipped_normals": {
-        "improve_flattenability": r"the region's faces are not consistently oriented, so 'outward' is not defined: "
-                                  r"recalculate the normals first \(Mesh > Normals > Recalculate Outside\)",
-        "unfold": r"patch 0: the patch's faces are not consistently oriented \(some normals point the other way\): "
-                  r"recalculate the normals first \(Mesh > Normals > Recalculate Outside\)",
+        "improve_flattenability": r"the region's faces are not consistently oriented \(\d+ of its \d+ triangles point "
+                                  r"the other way\), so 'outward' is not defined: recalculate the normals first "
+                                  r"\(Mesh > Normals > Recalculate Outside\)",
+        "unfold": r"patch \d: the patch's faces are not consistently oriented \(\d+ of its \d+ triangles point the "
+                  r"other way\): recalculate the normals first \(Mesh > Normals > Recalculate Outside\)",
         "export_pattern": NO_PATTERN,
         "make_shell": r"the region's faces are not consistently oriented \(at the edge between vertices \d+ and \d+, "
                       r"triangle \d+\): recalculate the normals \(Mesh > Normals > Recalculate Outside\)",
@@ -466,18 +474,41 @@ EXPECT: dict[str, dict[str, str]] = {
         "smooth_cuts": NO_PATCHES, "export_pattern": NO_PATTERN, "export_parts": NO_PARTS,
     },
 }
-#: warnings a FINISHED step must give (a regex per step; "*": every step that reads the region)
-READS = ("saliency_preview", "segment", "improve_flattenability", "unfold", "make_shell", "print_segment", "orient_parts")
+#: warnings a step must give (a regex per step)
+READS = ("saliency_preview", "segment", "improve_flattenability", "unfold", "make_shell", "print_segment",
+         "orient_parts")
 WARN: dict[str, dict[str, str]] = {
     "modifiers": {op: r"'skin' has 2 modifier\(s\) \(Subdivision, Displace\) that the bolus tools do not see: they "
                       r"work on the mesh as it is without them \(as in Edit Mode\); to use the shape shown, apply them "
-                      r"first \(Object > Apply > Visual Geometry to Mesh\)" for op in READS + ("smooth_cuts", "select_area")},
+                      r"first \(Object > Apply > Visual Geometry to Mesh\)"
+                  for op in READS + ("smooth_cuts", "select_area")},
     "loose": {op: r"5 loose vertices \(in no face\) were ignored" for op in READS},
     "duplicate_vertices": {op: r"1 loose vertices \(in no face\) were ignored" for op in READS if op != "segment"},
     "edit_nothing_selected": {op: r"No faces selected in Edit Mode: using the whole mesh" for op in READS},
     "nonmanifold_edge": {"saliency_preview": r"1 non-manifold edges \(e\.g\. between vertices {a} and {b}\): their "
                                              r"vertices are treated like boundary vertices".format(**_nm)},
 }
+
+
+def test_misoriented_faces():
+    """The count the winding refusals give (topology.misoriented_faces): the minority of each piece."""
+    from badmesh import arrays
+    from bolus_addon.core.topology import misoriented_faces, misoriented_text
+
+    def tris(polys):
+        return np.array([[p[0], p[k], p[k + 1]] for p in polys for k in range(1, len(p) - 1)])
+
+    (_, Q), _ = arrays("clean")
+    F = tris(Q)
+    assert not misoriented_faces(F).any()
+    (_, Q), _ = arrays("flipped_normals")
+    bad = misoriented_faces(tris(Q))
+    np.testing.assert_array_equal(np.nonzero(bad)[0], np.arange(140, 200))  # the 30 turned quads 70..99
+    assert misoriented_text(tris(Q)) == "60 of its 200 triangles point the other way"
+    assert not misoriented_faces(np.r_[F, F[::-1, ::-1] + F.max() + 1]).any()  # two pieces, each consistent
+    n = 8  # a Moebius strip cannot be wound consistently: every triangle is flagged
+    Q = [[k, n + k, n + k + 1, k + 1] for k in range(n - 1)] + [[n - 1, 2 * n - 1, 0, n]]
+    assert misoriented_faces(tris(Q)).all()
 
 
 @pytest.mark.parametrize("name", list(CASES))

@@ -44,7 +44,7 @@ from threadpoolctl import threadpool_limits
 from .errors import BolusError
 from .improve_objective import MU_DEFAULT, SurfaceObjective, uniform_laplacian
 from .saliency import corner_angle_sums, flattenability, flattenability_value, smooth_for_analysis
-from .topology import MeshTopology, check_mesh, submesh
+from .topology import MeshTopology, check_mesh, misoriented_text, submesh
 
 __all__ = ["METHODS", "DEFAULT_METHOD", "FLAT_VARPI", "SurfaceStats", "PatchImprovement", "Improvement",
            "ImproveJob", "improve_flattenability", "gradient_steps", "surface_stats", "improve_messages"]
@@ -233,8 +233,9 @@ class ImproveJob:
         topo = MeshTopology(V, F)
         he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
         if len(np.unique(he[:, 0] * topo.n + he[:, 1])) < len(he):
-            raise BolusError("the region's faces are not consistently oriented, so 'outward' is not defined: "
-                             "recalculate the normals first (Mesh > Normals > Recalculate Outside)")
+            raise BolusError(f"the region's faces are not consistently oriented ({misoriented_text(F)}), so "
+                             "'outward' is not defined: recalculate the normals first (Mesh > Normals > Recalculate "
+                             "Outside)")
         if not topo.boundary_edges.any():
             raise BolusError("the region is a closed surface, with no border to hold the bolus in place: select the "
                              "treatment area (an open part of the skin), not the whole closed mesh")

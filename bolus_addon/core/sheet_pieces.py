@@ -61,7 +61,7 @@ from .refine import refine_lengths_l1
 from .relax import relax_lbfgs
 from .saliency import DEFAULT_SMOOTHING_MM
 from .springs import build_springs
-from .topology import MeshTopology, check_mesh, submesh
+from .topology import MeshTopology, check_mesh, misoriented_text, submesh
 from .unfold import Unfolding, labelled_patches, unfold_patch
 
 __all__ = ["Dart", "Split", "SheetPieces", "sheet_pieces", "iter_sheet_pieces", "MAX_PIECES", "MAX_DARTS",
@@ -311,7 +311,8 @@ def _piece_mesh(V, F, faces, dart_edges, disk_edges=(), cut_text: str = "") -> _
     if _is_disk(topo):
         return _Mesh(Vc, Fc, origin, topo, cut_text, np.asarray(disk_edges, dtype=np.int64).reshape(-1, 2))
     cut = cut_to_disk(Vc, Fc)
-    disk = np.concatenate([np.stack([origin[c[:-1]], origin[c[1:]]], 1) for c in cut.cut_paths])
+    disk = np.concatenate([np.stack([origin[c[:-1]], origin[c[1:]]], 1) for c in cut.cut_paths]
+                          + [np.zeros((0, 2), dtype=np.int64)])  # no path: a disk but for a bow-tie vertex
     origin = origin[cut.vert_origin]
     return _Mesh(cut.V, cut.F, origin, MeshTopology(cut.V, cut.F), cut.description if cut.was_cut else "", disk)
 
@@ -724,7 +725,7 @@ def _check_winding(F: np.ndarray) -> None:
     he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
     n = int(F.max()) + 1
     if len(np.unique(he[:, 0] * n + he[:, 1])) < len(he):
-        raise BolusError("the patch's faces are not consistently oriented (some normals point the other way): "
+        raise BolusError(f"the patch's faces are not consistently oriented ({misoriented_text(F)}): "
                          "recalculate the normals first (Mesh > Normals > Recalculate Outside)")
 
 

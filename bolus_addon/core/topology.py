@@ -30,6 +30,8 @@ __all__ = [
     "face_areas",
     "face_normals",
     "corner_angles",
+    "misoriented_faces",
+    "misoriented_text",
 ]
 
 
@@ -166,6 +168,47 @@ def triangulate_polygons(corner_verts, face_sizes) -> tuple[np.ndarray, np.ndarr
         axis=1,
     )
     return F, tri_face
+
+
+def misoriented_faces(F) -> np.ndarray:
+    """(m,) bool: the triangles of F (m,3) wound against the majority of their edge-connected
+    piece (two triangles that share an edge agree when they walk it in opposite directions);
+    all False when every piece is consistently wound.  A piece that cannot be wound
+    consistently (a Moebius strip) has all its triangles flagged."""
+    F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
+    m = len(F)
+    if m == 0:
+        return np.zeros(0, dtype=bool)
+    he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
+    lo, hi = he.min(axis=1), he.max(axis=1)
+    order = np.lexsort((hi, lo))
+    face = np.repeat(np.arange(m), 3)[order]
+    fwd = (he[:, 0] < he[:, 1])[order]
+    pair = (lo[order][1:] == lo[order][:-1]) & (hi[order][1:] == hi[order][:-1])
+    a, b = face[:-1][pair], face[1:][pair]
+    agree = fwd[:-1][pair] != fwd[1:][pair]
+    # node f: triangle f as wound, node f + m: f turned over; agreeing neighbours join f-g and
+    # f'-g', disagreeing ones f-g' and f'-g
+    i = np.r_[a, a + m]
+    j = np.r_[np.where(agree, b, b + m), np.where(agree, b + m, b)]
+    G = sp.coo_matrix((np.ones(len(i)), (i, j)), shape=(2 * m, 2 * m))
+    _, side = connected_components(G, directed=False)
+    _, piece = connected_components(sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)), directed=False)
+    first = np.full(piece.max() + 1, m)
+    np.minimum.at(first, piece, np.arange(m))
+    turned = side[:m] != side[first[piece]]  # against the piece's first triangle
+    bad = side[:m] == side[m:]  # both ways in one class: not orientable
+    n_turned = np.bincount(piece, weights=turned, minlength=len(first))
+    n_all = np.bincount(piece, minlength=len(first))
+    flag = np.where(n_turned[piece] * 2 > n_all[piece], ~turned, turned)
+    return flag | bad[first[piece]]
+
+
+def misoriented_text(F) -> str:
+    """'12 of its 200 triangles point the other way' (`misoriented_faces`) for a refusal."""
+    k = int(misoriented_faces(F).sum())
+    m = len(np.asarray(F).reshape(-1, 3))
+    return f"{k} of its {m} triangles point the other way"
 
 
 def _face_cross(V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -444,7 +487,7 @@ class MeshTopology:
                 i, j = (int(x) for x in self.edges[bad[0]])
                 raise BolusError(f"{what} has {len(bad)} non-manifold edge(s) (shared by more than two triangles), "
                                  f"e.g. the edge between vertices {i} and {j}; Select > Select All by Trait > "
-                                 "Non Manifold shows them")
+                                 "Non Manifold shows them: delete the extra faces there")
 
     def require_nondegenerate(self, what: str = "the mesh", vert_ids=None) -> None:
         """Raise BolusError naming the first zero-area triangle (`refuse_zero_area`)."""

@@ -75,7 +75,7 @@ from .springs import (
     spring_energy,
     stiffness_laplacian,
 )
-from .topology import MeshTopology, check_mesh, submesh
+from .topology import MeshTopology, check_mesh, misoriented_text, submesh
 
 __all__ = [
     "Springs",
@@ -221,7 +221,7 @@ def _check_patch(V, F, method: str, start: str) -> tuple[np.ndarray, np.ndarray,
     he = np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2)
     if len(np.unique(he[:, 0] * topo.n + he[:, 1])) < len(he):
         raise BolusError(
-            "the patch's faces are not consistently oriented (some normals point the other way): "
+            f"the patch's faces are not consistently oriented ({misoriented_text(F)}): "
             "recalculate the normals first (Mesh > Normals > Recalculate Outside)"
         )
     return V, F, topo
