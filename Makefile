@@ -1,6 +1,7 @@
 # make demo  - run the main job on the built-in example and write out/
 # make test  - the whole test suite on Blender 5.0.1 and 5.2.3, the smoke subset on 4.5 LTS and 4.2 LTS
 # make test-core - the bpy-free tests only (Blender 5.0.1's venv)
+# make fuzz - hypothesis fuzzing of every operator: >= 1,000 random surfaces and parameters (Blender 5.0.1)
 # make bench - benchmarks (printed, not asserted), their tables written to docs/benchmarks.md
 # make pictures - the README's step-by-step pictures in docs/img/ (scripts/readme_pictures.py)
 # make extension - the installable extension zip in dist/ (Blender's own builder, from bpy)
@@ -38,7 +39,7 @@ PIP_INSTALL := -m pip install --quiet --disable-pip-version-check
 NO_PY313 := SKIPPED: the Blender 5.2.3 run (.venv52) -- no working Python 3.13 found (python3.13 on PATH, \
 pyenv's versions/3.13.*, /usr/local/bin, /usr/bin); install one or pass PYTHON313=/path/to/python3.13
 
-.PHONY: demo pictures test test-core bench extension extension-wheels clean
+.PHONY: demo pictures test test-core fuzz bench extension extension-wheels clean
 
 $(VENV)/.installed: requirements.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -80,6 +81,11 @@ test: $(VENV)/.installed $(VENV45)/.installed $(VENV42)/.installed $(if $(PYTHON
 
 test-core: $(VENV)/.installed
 	$(PY) -m pytest tests -m "not blender"
+
+# More than 1,000 random surfaces and parameters through every operator (hypothesis profile "bolus-fuzz";
+# `make test` runs about 50 fixed ones); 30-40 minutes on 2 cores.
+fuzz: $(VENV)/.installed
+	BOLUS_FUZZ=1 $(PY) -m pytest tests/test_fuzz_operators.py tests/test_fuzz_core.py -q --hypothesis-show-statistics
 
 # docs/benchmarks.md is written fresh (a header with the date, machine and versions), then every
 # script appends its tables; each runs even when an earlier one failed, the target fails if any did.
