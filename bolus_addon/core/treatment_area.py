@@ -252,7 +252,7 @@ def _distance_near(V, F, p, f0, radius, base_reach) -> np.ndarray:
         i, j = (int(ids[x]) for x in topo.edges[bad[0]])
         raise BolusError(f"the surface near the cursor has {len(bad)} non-manifold edge(s) (shared by more than two "
                          f"triangles), e.g. the edge between vertices {i} and {j}; Select > Select All by Trait > "
-                         "Non Manifold shows them")
+                         "Non Manifold shows them: delete the extra faces there")
     d = np.full(len(V), np.inf)
     d[ids] = geodesic_distance(V[ids], Fb, p, int(np.count_nonzero(near[:f0])), max_mm=reach)
     return d
