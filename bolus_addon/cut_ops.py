@@ -17,6 +17,7 @@ import numpy as np
 from . import mesh_cuts, mesh_io
 from .core.colormap import categorical_linear_rgba
 from .core.cutlines import cut_region_check, patch_table, smooth_cuts
+from .core.budget import check_budget
 from .core.errors import BolusError
 from .operators import ATTR_PATCH, ATTR_PATCH_COLOR, PROP_PATCH_TABLE, BolusOperator
 
@@ -59,6 +60,8 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
         table = mesh_io.json_prop(obj, PROP_PATCH_TABLE)
         table = table if isinstance(table, dict) else {}
         smoothing = float(table.get("smoothing_mm", 0.0) or 0.0)
+        check_budget("smooth_cuts", [len(region.F)], f"the patches of '{obj.name}' have {len(region.F):,} triangles",
+                     "select the treatment area first (Select Treatment Area) and segment it")
         return SimpleNamespace(obj=obj, region=region, labels=labels, warnings=warnings, table=table,
                                smoothing=smoothing)
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from . import mesh_io
 from .core.colormap import outside_linear_rgba, srgb_to_linear
+from .core.budget import check_budget
 from .core.errors import BolusError
 from .core.improve import ImproveJob, improve_messages
 from .core.saliency import DEFAULT_SMOOTHING_MM
@@ -87,6 +88,9 @@ class _ImproveRun:
             out = len(np.unique(self.region.tri_poly[labels < 0]))
             self.infos.append(f"{out} faces outside the segmented patches ({ATTR_PATCH} = -1) were left as they are")
         self.patched = labels is not None
+        sizes = np.bincount(np.zeros(len(self.region.F), np.int64) if labels is None else labels[labels >= 0])
+        check_budget("improve_flattenability", sizes[sizes > 0], f"the region has {len(self.region.F):,} triangles",
+                     "select the treatment area first (Select Treatment Area)")  # issue 14 point 2
         self.job = ImproveJob(self.region.V, _world_winding(src, self.region.F), self.max_gap_mm, method=method,
                               rng=self.seed, smoothing_mm=self.smoothing_mm, patch_labels=labels,
                               progress=op.progress, vert_ids=self.region.vert_ids)

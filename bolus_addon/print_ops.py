@@ -23,6 +23,7 @@ from mathutils import Matrix
 from . import mesh_io
 from .compat import stl_export as _stl_export  # version differences live in compat
 from .core.colormap import categorical_linear_rgba
+from .core.budget import check_budget
 from .core.errors import BolusError
 from .core.layout import centre_on_plate, plate_layout
 from .core.pattern_mesh import pattern_polygons
@@ -83,6 +84,9 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
         if solid_print_ops.is_bolus_object(context.active_object):  # a solid from make_shell: cut into solid parts
             return solid_print_ops.prepare_solid(self, context)
         region, topo, warnings = self.read_region(context, allow_nonmanifold=True)
+        check_budget("print_segment", [topo.m], f"the region has {topo.m:,} triangles",
+                     "make the bolus on the treatment area first (Select Treatment Area, Make Bolus) and split "
+                     "that")  # refuse now, not after minutes (issue 14)
         return SimpleNamespace(solid=False, region=region, topo=topo, warnings=warnings, parts=int(self.parts),
                                method=self.method.lower(), seed=int(self.seed))
 

@@ -1,0 +1,125 @@
+"""Time budget (issue 14 point 2): an operator finishes or refuses within a minute.
+
+A step whose work grows faster than its input (unfolding a patch, smoothing the cuts of a
+whole scan) estimates its time from the triangle counts BEFORE the long work and refuses
+with the figures and what to do when the estimate is over the budget.  The estimate of a
+job of pieces m_1..m_k triangles (done one after another) is
+
+    t = sum_i  T * (m_i / M) ** p        (seconds)
+
+with (T, M, p) per step in `COSTS`, calibrated on the development machine (2 cores, see
+bench/rangescan_bench.py and docs/benchmarks.md); the budget is `BUDGET_S` seconds, or the
+environment variable ``BOLUS_TIME_BUDGET_S`` (tests lower it; 0 or "off" turns the check off).
+bpy-free.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .errors import BolusError
+
+__all__ = ["BUDGET_S", "BUDGET_ENV", "COSTS", "budget_s", "estimate_s", "max_triangles", "decimate_ratio",
+           "check_budget"]
+
+#: seconds an operator may take before it must have refused (issue 14: "within a minute")
+BUDGET_S = 60.0
+BUDGET_ENV = "BOLUS_TIME_BUDGET_S"
+#: step -> (T seconds, at M triangles, growth exponent p): t = T (m / M)^p per piece, fitted to
+#: the core call of each step on nose-tip crops of nefertiti x4 (bench/rangescan_bench.py has the
+#: commands) on the 2-core development machine while other jobs ran (load 7-8: about twice the
+#: time of an idle machine, so the estimates err on the side of refusing):
+#: unfold = `sheet_pieces` with the operator's defaults (Max EL 2 %): 3k 7.7 s, 6k 20 s, 12k 107 s;
+#: improve = `ImproveJob` (GRADIENT, 1 mm): 2k 14.5 s, 5k 24.9 s, 10k 47.6 s;
+#: smooth_cuts = `cutlines.smooth_cuts` (3 patches): 50k 14.9 s, 150k 54.6 s;
+#: print_segment = `print_segmentation` (3 parts): 30k 16.4 s, 120k 20.0 s.
+COSTS = {
+    "unfold": (67.0, 10_000, 1.9),
+    "improve_flattenability": (47.6, 10_000, 0.74),
+    "smooth_cuts": (54.6, 150_000, 1.18),
+    "print_segment": (20.0, 120_000, 1.0),
+}
+#: seconds per triangle of the region an operator spends outside the step (read, check, write)
+OVERHEAD_S_PER_TRIANGLE = 2.0e-5
+#: the steps as the user knows them (the operators' labels)
+LABELS = {"unfold": "Unfold Patches", "improve_flattenability": "Improve Flattenability",
+          "smooth_cuts": "Smooth Cut Lines", "print_segment": "Split into Print Parts"}
+
+
+def budget_s() -> float | None:
+    """The budget in seconds (`BUDGET_S`, or ``BOLUS_TIME_BUDGET_S``); None when turned off."""
+    raw = os.environ.get(BUDGET_ENV, "").strip()
+    if not raw:
+        return BUDGET_S
+    if raw.lower() in ("off", "none", "0"):
+        return None
+    try:
+        val = float(raw)
+    except ValueError:
+        raise BolusError(f"{BUDGET_ENV}={raw!r} is not a number of seconds (or 'off')") from None
+    if not np.isfinite(val) or val < 0:
+        raise BolusError(f"{BUDGET_ENV}={raw!r} must be a positive number of seconds (or 'off')")
+    return val if val > 0 else None
+
+
+def _cost(step: str):
+    try:
+        return COSTS[step]
+    except KeyError:
+        raise BolusError(f"no time estimate for the step {step!r}") from None
+
+
+def estimate_s(step: str, sizes) -> float:
+    """Estimated seconds of ``step`` on pieces of ``sizes`` triangles (an int or a sequence), one after another."""
+    T, M, p = _cost(step)
+    m = np.atleast_1d(np.asarray(sizes, dtype=np.float64))
+    return float(np.sum(T * (np.maximum(m, 0.0) / M) ** p))
+
+
+def max_triangles(step: str, seconds: float) -> int:
+    """The largest piece (triangles) ``step`` handles within ``seconds``."""
+    T, M, p = _cost(step)
+    return int(M * (max(seconds, 0.0) / T) ** (1.0 / p))
+
+
+def decimate_ratio(step: str, sizes, seconds: float) -> float:
+    """The Decimate ratio (0..1, two digits, rounded down) that brings the estimate within ``seconds``."""
+    est = estimate_s(step, sizes)
+    if est <= seconds:
+        return 1.0
+    _, _, p = _cost(step)
+    r = (seconds / est) ** (1.0 / p)
+    return max(np.floor(r * 100.0) / 100.0, 0.01)
+
+
+def check_budget(step: str, sizes, what: str, advice: str) -> float:
+    """Refuse (BolusError) when ``step`` on pieces of ``sizes`` triangles would exceed the budget.
+
+    The step gets the budget less `OVERHEAD_S_PER_TRIANGLE` per triangle (reading the region,
+    checking it, writing the result).  what: the input in words ("the region has 519,844
+    triangles in 17 islands"); advice: what to do first ("select the treatment area first"; the
+    Decimate ratio that would fit is added).  Returns the estimate (seconds)."""
+    sizes = np.atleast_1d(np.asarray(sizes, dtype=np.int64))
+    est = estimate_s(step, sizes)
+    limit = budget_s()
+    if limit is None:
+        return est
+    room = max(limit - OVERHEAD_S_PER_TRIANGLE * float(sizes.sum()), 0.25 * limit)
+    if est <= room:
+        return est
+    name = LABELS.get(step, step)
+    biggest = int(sizes.max()) if sizes.size else 0
+    raise BolusError(
+        f"{what} (largest piece {biggest:,} triangles): {name} would take about {_fmt_s(est)} on this computer, "
+        f"over the {limit:.0f} s budget, so it was not started (one piece of up to about "
+        f"{max_triangles(step, room):,} triangles fits in it): {advice}, or decimate the mesh (Decimate modifier, "
+        f"ratio {decimate_ratio(step, sizes, room):.2f})")
+
+
+def _fmt_s(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"

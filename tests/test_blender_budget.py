@@ -1,0 +1,131 @@
+"""The time budget (issue 14 point 2: every operator finishes or refuses within a minute).
+
+`core.budget` estimates a step's time from the triangle counts; an operator whose estimate is
+over the budget refuses BEFORE the long work, with the figures and what to do.  The budget is
+60 s (`budget.BUDGET_S`) or ``BOLUS_TIME_BUDGET_S``: here it is lowered on small meshes (the
+520k-face range scan itself is in bench/rangescan_bench.py, not in the tests).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import assert_same_object, make_object, object_snapshot
+from meshgen import spherical_cap
+
+from bolus_addon.core import budget
+from bolus_addon.core.errors import BolusError
+
+ENV = budget.BUDGET_ENV
+
+
+# --------------------------------------------------------------------------- core (no bpy)
+def test_estimate_grows_with_the_pieces_and_inverts(monkeypatch):
+    monkeypatch.delenv(ENV, raising=False)
+    for step, (T, M, p) in budget.COSTS.items():
+        assert budget.estimate_s(step, M) == pytest.approx(T)
+        assert budget.estimate_s(step, [M, M]) == pytest.approx(2 * T)  # pieces one after another
+        n = budget.max_triangles(step, 30.0)
+        assert budget.estimate_s(step, n) <= 30.0 + 1e-9 < budget.estimate_s(step, n + max(n // 100, 1))
+        big = [3 * M, M]
+        r = budget.decimate_ratio(step, big, 30.0)
+        assert 0 < r < 1
+        assert budget.estimate_s(step, [int(r * m) for m in big]) <= 30.0  # the advised ratio fits
+        assert budget.decimate_ratio(step, [10], 30.0) == 1.0
+
+
+def test_budget_from_the_environment(monkeypatch):
+    monkeypatch.delenv(ENV, raising=False)
+    assert budget.budget_s() == budget.BUDGET_S == 60.0
+    monkeypatch.setenv(ENV, "2.5")
+    assert budget.budget_s() == 2.5
+    for off in ("off", "0", "none"):
+        monkeypatch.setenv(ENV, off)
+        assert budget.budget_s() is None
+        assert budget.check_budget("unfold", [10 ** 9], "huge", "do less") > 1e6  # no refusal when off
+    for bad in ("soon", "-3", "nan"):
+        monkeypatch.setenv(ENV, bad)
+        with pytest.raises(BolusError, match=ENV):
+            budget.budget_s()
+
+
+def test_refusal_names_the_figures_and_what_to_do(monkeypatch):
+    monkeypatch.delenv(ENV, raising=False)
+    sizes = [125_188, 121_166, 67_063]
+    with pytest.raises(BolusError) as exc:
+        budget.check_budget("unfold", sizes, "the region has 313,417 triangles in 3 islands",
+                            "select the treatment area first (Select Treatment Area)")
+    msg = str(exc.value)
+    for part in ("313,417 triangles in 3 islands", "largest piece 125,188 triangles", "Unfold Patches would take",
+                 "over the 60 s budget", "not started", "Select Treatment Area", "Decimate modifier, ratio 0."):
+        assert part in msg, (part, msg)
+    # within the budget: the estimate, no refusal
+    assert budget.check_budget("unfold", [500], "small", "nothing") < 1.0
+    with pytest.raises(BolusError, match="no time estimate"):
+        budget.check_budget("teleport", [5], "x", "y")
+
+
+# --------------------------------------------------------------------------- operators (bpy)
+def cap_object(bpy, scene):
+    """A spherical cap (radius 60 mm, 1,3xx triangles) in a mm scene: an open skin-like region."""
+    V, F = spherical_cap(60.0, 50.0, 4)
+    scene.unit_settings.scale_length = 0.001
+    return make_object(bpy, V, F.tolist(), name="cap")
+
+
+def write_patches(bpy, ob, name="bolus_patch"):
+    """Two patches (x < 0, x >= 0) as a face attribute, as Segment writes them."""
+    me = ob.data
+    c = np.array([p.center[0] for p in me.polygons])
+    attr = me.attributes.new(name, "INT", "FACE")
+    attr.data.foreach_set("value", (c >= 0).astype(np.int32))
+    me.update()
+
+
+def refuses_over_budget(bpy, monkeypatch, ob, op, match, **kw):
+    """op refuses (the source unchanged, no new object) under a budget of 1 ms; finishes under the default."""
+    before, objects = object_snapshot(ob), set(bpy.data.objects.keys())
+    monkeypatch.setenv(ENV, "0.001")
+    with pytest.raises(RuntimeError, match=match):
+        getattr(bpy.ops.bolus, op)(**kw)
+    assert_same_object(before, object_snapshot(ob))
+    assert set(bpy.data.objects.keys()) == objects
+    monkeypatch.delenv(ENV)
+    assert getattr(bpy.ops.bolus, op)(**kw) == {"FINISHED"}
+
+
+@pytest.mark.blender
+def test_unfold_refuses_over_budget(bpy_addon, scene, monkeypatch):
+    bpy = bpy_addon
+    ob = cap_object(bpy, scene)
+    write_patches(bpy, ob)
+    refuses_over_budget(bpy, monkeypatch, ob, "unfold",
+                        r"the region has [\d,]+ triangles in 2 islands .*Unfold Patches would take about .* over the "
+                        r"0 s budget, so it was not started.*Select Treatment Area.*Decimate modifier, ratio",
+                        max_el=0.0)
+    assert bpy.data.objects.get("cap_pattern") is not None
+
+
+@pytest.mark.blender
+def test_improve_refuses_over_budget(bpy_addon, scene, monkeypatch):
+    bpy = bpy_addon
+    ob = cap_object(bpy, scene)
+    refuses_over_budget(bpy, monkeypatch, ob, "improve_flattenability",
+                        r"Improve Flattenability would take about .* not started.*Select Treatment Area",
+                        max_gap_mm=0.5)
+
+
+@pytest.mark.blender
+def test_smooth_cuts_refuses_over_budget(bpy_addon, scene, monkeypatch):
+    bpy = bpy_addon
+    ob = cap_object(bpy, scene)
+    write_patches(bpy, ob)
+    refuses_over_budget(bpy, monkeypatch, ob, "smooth_cuts", r"the patches of 'cap' have [\d,]+ triangles.*Smooth "
+                        r"Cut Lines would take about .* not started")
+
+
+@pytest.mark.blender
+def test_print_segment_refuses_over_budget(bpy_addon, scene, monkeypatch):
+    bpy = bpy_addon
+    ob = cap_object(bpy, scene)
+    refuses_over_budget(bpy, monkeypatch, ob, "print_segment", r"Split into Print Parts would take about .* not "
+                        r"started.*Make Bolus", parts=2)
