@@ -40,7 +40,7 @@ CHAIN = [
     ("improve_flattenability", {"max_gap_mm": 1.0}),
     ("unfold", {}),
     ("export_pattern", {}),  # filepath: tmp_path
-    ("make_shell", {"thickness_mm": 10.0, "resolution_mm": 2.5}),
+    ("make_shell", {"thickness_mm": 12.0, "resolution_mm": 3.0}),
     ("print_segment", {"parts": 2}),
     ("orient_parts", {}),
     ("export_parts", {}),  # directory: tmp_path
@@ -242,7 +242,13 @@ def check_valid(bpy, op, ob, tmp_path, kw) -> None:
         P = co[tris][:, :, :2]
         a, b = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
         area = 0.5 * np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
-        assert area.sum() > 0
+        # true size: the pattern's area is the source's in world space (object scale and rotation applied,
+        # the mesh data without modifiers), up to the unfolding's area error
+        M = np.array(ob.matrix_world)
+        W = _get(me.vertices, "co", nv, np.float64, 3) @ M[:3, :3].T
+        T = _tris(me)
+        skin = 0.5 * np.linalg.norm(np.cross(W[T[:, 1]] - W[T[:, 0]], W[T[:, 2]] - W[T[:, 0]]), axis=1).sum()
+        assert area.sum() == pytest.approx(skin, rel=0.03), (area.sum(), skin)
     elif op == "export_pattern":
         path = tmp_path / "pattern.svg"
         assert path.stat().st_size > 0
