@@ -3,8 +3,9 @@
 `unfold` never touches the source: it reads the region and its `bolus_patch` labels
 and builds a new object ``<name>_pattern`` in z = 0 at true size (1 mm of pattern =
 1 mm on the patient, in scene units), whose polygons are the source's polygons with
-their corner order, one island per patch.  From the sidebar it runs modally, one patch
-per step, with a progress bar; Esc cancels and leaves nothing behind.  The numbers
+their corner order, one island per patch.  From the sidebar it runs modally, the
+unfolding in a worker thread (operators.py), with a progress bar; Esc cancels and leaves
+nothing behind.  The numbers
 (islands, polygon corners, float32 positions, errors, the pattern table and the
 messages) come from `core.pattern_mesh`; this module converts, calls, writes, reports.
 """
@@ -52,7 +53,11 @@ class _UnfoldJob:
 
     def __init__(self, context, method: str, refine: bool, gap_mm: float, max_el_pct: float = 0.0,
                  thickness_mm: float = 0.0, progress=None):
-        """progress(fraction, text): the core's progress (overall fraction, "patch k/n: step")."""
+        """Read the region, its labels and the settings (main thread); `start` (bpy-free) does the rest.
+
+        progress(fraction, text): the core's progress (overall fraction, "patch k/n: step"); the
+        attribute ``progress`` may be replaced before `start` (a worker thread's)."""
+        self.progress = progress
         self.max_el = check_max_el(max_el_pct)
         self.thickness = check_thickness(thickness_mm)
         self.region = region = mesh_io.read_region(context)
@@ -62,23 +67,30 @@ class _UnfoldJob:
         if poly_labels is None:
             poly_labels = np.zeros(len(region.mesh.polygons), dtype=np.int64)
             self.warnings.append(f"no '{ATTR_PATCH}' attribute (run Segment first): unfolded as a single patch")
-        # a patch cut in two by the region (or edited) becomes one island per connected piece
-        self.islands = patch_islands(region.V, region.F, poly_labels[region.tri_poly], face_groups=region.tri_poly,
-                                     vert_ids=region.vert_ids)
-        if self.islands.left_out:  # expected when a region was segmented: said once, as INFO
-            self.infos.append(f"{self.islands.left_out} faces outside the segmented patches (bolus_patch = -1) "
-                              "were left out of the pattern")
         settings = getattr(context.scene, "bolus", None)
         self.warn_pct = float(getattr(settings, "warn_distortion_pct", DEFAULT_WARN_FRACTION * 100.0))
         self.sigma_mm = float(getattr(settings, "smoothing_mm", DEFAULT_SMOOTHING_MM))
         self.curvatures = None
-        self.V_ref = self._reference(region)
         self.poly_labels = poly_labels
         self.gap_mm = gap_mm
-        self.iter = iter_sheet_pieces(self.V_ref, region.F, self.islands.islands, max_el=self.max_el,
-                                      face_groups=region.tri_poly, sigma_mm=self.sigma_mm, method=method.lower(),
-                                      refine_rounds=3 if refine else 0, progress=progress)
+        self.method, self.refine = method.lower(), bool(refine)
+        self.corners = mesh_io.polygon_corners(region.mesh)  # for build_pattern
         self.done: list = []
+
+    def start(self) -> None:
+        """bpy-free: the islands, the reference surface and the island iterator."""
+        region = self.region
+        # a patch cut in two by the region (or edited) becomes one island per connected piece
+        self.islands = patch_islands(region.V, region.F, self.poly_labels[region.tri_poly],
+                                     face_groups=region.tri_poly, vert_ids=region.vert_ids)
+        if self.islands.left_out:  # expected when a region was segmented: said once, as INFO
+            self.infos.append(f"{self.islands.left_out} faces outside the segmented patches (bolus_patch = -1) "
+                              "were left out of the pattern")
+        self.V_ref = self._reference(region)
+        progress = None if self.progress is None else (lambda f, t="": self.progress(f, t))
+        self.iter = iter_sheet_pieces(self.V_ref, region.F, self.islands.islands, max_el=self.max_el,
+                                      face_groups=region.tri_poly, sigma_mm=self.sigma_mm, method=self.method,
+                                      refine_rounds=3 if self.refine else 0, progress=progress)
         self.count = self.islands.count
 
     def _reference(self, region) -> np.ndarray:
@@ -134,20 +146,26 @@ def _link_object(context, src: bpy.types.Object, name: str, me: bpy.types.Mesh) 
     return obj
 
 
-def build_pattern_object(context, job: _UnfoldJob) -> bpy.types.Object:
-    """Create (or refill) ``<name>_pattern`` from a finished job; returns it (job.build: the
-    figures, job.layout: the pieces, darts and splits)."""
+def compute_pattern(job: _UnfoldJob) -> None:
+    """bpy-free, after the last island: job.layout (the pieces, darts and splits) and job.build
+    (the pattern's vertices, polygons and figures)."""
     region = job.region
-    src = region.obj
     job.layout = lay = collect_pieces(job.islands, job.done)
     b = build_pattern(job.V_ref, region.F, region.tri_poly, region.vert_ids, lay.islands, lay.unfoldings,
-                      job.poly_labels, *mesh_io.polygon_corners(region.mesh), mm_per_unit=region.mm_per_unit,
-                      gap_mm=job.gap_mm)
+                      job.poly_labels, *job.corners, mm_per_unit=region.mm_per_unit, gap_mm=job.gap_mm)
     diagnose_pieces(job.V_ref, region.F, lay.islands, lay.unfoldings, b.rows, job.warn_pct / 100.0, job.sigma_mm)
     # the EL limit of the advice: the target, or with refinement off the user's warning threshold
     bending = piece_bending(region.V, region.F, lay.islands.islands, job.thickness, [r["EL"] for r in b.rows],
                             job.max_el or job.warn_pct / 100.0, sigma_mm=job.sigma_mm, curvatures=job.curvatures)
     add_sheet_figures(b.rows, lay, bending)
+    job.build = b
+
+
+def build_pattern_object(context, job: _UnfoldJob) -> bpy.types.Object:
+    """Create (or refill) ``<name>_pattern`` from a job after `compute_pattern`; returns it."""
+    region = job.region
+    src = region.obj
+    b, lay = job.build, job.layout
     name = src.name + PATTERN_SUFFIX
     me = mesh_io.new_mesh(name, b.co, b.polygons.corner_pat, b.polygons.loop_starts)
     mesh_io.write_attribute(me, ATTR_SOURCE_FACE, "INT", "FACE", b.polygons.polys)
@@ -168,7 +186,6 @@ def build_pattern_object(context, job: _UnfoldJob) -> bpy.types.Object:
         "sheet_thickness_mm": job.thickness, "pieces": len(b.rows), "darts": len(lay.darts),
         "splits": len(lay.splits), "unmet": [{"patch": p, "reason": r} for p, r in lay.unmet],
         "islands": b.rows})
-    job.build = b
     return obj
 
 
@@ -184,22 +201,28 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
     refine: refine_property()
     gap_mm: gap_property()
 
-    _job = None
-
     @classmethod
     def poll(cls, context):  # not on a pattern (would make '<name>_pattern_pattern')
         from .guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
 
         return poll_for(cls, context)
 
-    def run(self, context):
-        job = _UnfoldJob(context, self.method, self.refine, self.gap_mm, self.max_el, self.sheet_thickness_mm,
-                         progress=self.progress)
-        while job.step():
-            self.progress(len(job.done) / job.count, f"{len(job.done)}/{job.count} islands unfolded")
-        return self.finish(context, job)
+    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    def prepare(self, context):
+        return _UnfoldJob(context, self.method, self.refine, self.gap_mm, self.max_el, self.sheet_thickness_mm,
+                          progress=self.progress)
 
-    def finish(self, context, job: _UnfoldJob):
+    @staticmethod
+    def compute(job, progress):
+        job.progress = progress
+        job.start()
+        while job.step():
+            progress(len(job.done) / job.count, f"{len(job.done)}/{job.count} islands unfolded")
+        progress(1.0, "building the pattern")
+        compute_pattern(job)
+        return job
+
+    def finish(self, context, job: _UnfoldJob, result=None):
         with mesh_io.object_mode(job.region.obj):
             obj = build_pattern_object(context, job)
         self.warn_all(job.warnings)
@@ -212,29 +235,6 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
         for level, msg in msgs:
             self.report({level}, msg)
         return {"FINISHED"}
-
-    # interactive: one island per timer tick, Esc cancels.  BolusOperator guards both:
-    # errors become reports (abort() first for modal), no window falls back to execute.
-    def invoke(self, context, event):
-        self._job = _UnfoldJob(context, self.method, self.refine, self.gap_mm, self.max_el, self.sheet_thickness_mm,
-                         progress=self.progress)
-        self.start_modal(context)
-        self.report({"INFO"}, f"Unfolding {self._job.count} islands (Esc to cancel)")
-        return {"RUNNING_MODAL"}
-
-    def modal(self, context, event):
-        if event.type == "ESC":
-            self.abort(context)
-            self.report({"WARNING"}, "Unfolding cancelled: nothing was created")
-            return {"CANCELLED"}
-        if event.type != "TIMER":
-            return {"RUNNING_MODAL"}
-        more = self._job.step()
-        self.progress(len(self._job.done) / max(self._job.count, 1))
-        if more and len(self._job.done) < self._job.count:
-            return {"RUNNING_MODAL"}
-        self.abort(context)
-        return self.finish(context, self._job)
 
 
 classes = (BOLUS_OT_unfold,)

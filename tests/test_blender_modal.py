@@ -27,9 +27,10 @@ from test_blender_shell import hemisphere
 pytestmark = pytest.mark.blender
 
 #: the operators that run compute() in a worker thread from the sidebar (issue 14 point 4)
-THREADED = ("saliency_preview", "segment", "smooth_cuts", "select_area", "make_shell", "print_segment", "orient_parts")
-#: the ones that keep their own step jobs (one island / job step per timer tick)
-STEPPED = ("unfold", "improve_flattenability")
+THREADED = ("saliency_preview", "segment", "smooth_cuts", "select_area", "unfold", "make_shell", "print_segment",
+            "orient_parts")
+#: the one that keeps its own step job (one job step per timer tick; Esc keeps the best so far)
+STEPPED = ("improve_flattenability",)
 
 
 # ------------------------------------------------------------------ fakes of the window side
@@ -237,7 +238,7 @@ def test_without_a_window_and_with_nothing_to_do(bpy_addon):
 
 def test_long_operators_are_threaded(bpy_addon):
     """Every long operator has a staticmethod compute (it cannot reach the operator) and the
-    guarded threaded invoke / modal; unfold and improve keep their step jobs."""
+    guarded threaded invoke / modal; improve keeps its step job."""
     from bolus.bolus_addon.operators import BolusOperator  # noqa: PLC0415
 
     bpy = bpy_addon
@@ -255,7 +256,7 @@ def test_long_operators_are_threaded(bpy_addon):
 
 # ------------------------------------------------------------------ the real operators
 def operator_class(name):
-    for mod in ("analysis_ops", "cut_ops", "area_ops", "shell_ops", "print_ops"):
+    for mod in ("analysis_ops", "cut_ops", "area_ops", "pattern_ops", "shell_ops", "print_ops"):
         m = sys.modules[f"bolus.bolus_addon.{mod}"]
         for v in vars(m).values():
             if isinstance(v, type) and getattr(v, "bl_idname", None) == f"bolus.{name}":
@@ -334,7 +335,10 @@ class CallWatch:
                    (module_file, "<lambda>"), ("solid_print_ops.py", "compute_solid"),
                    ("solid_print_ops.py", "<lambda>"), ("shell_ops.py", "engrave_with"),
                    ("solid_print_ops.py", "_part_arrays"), ("solid_print_ops.py", "<genexpr>"),
-                   ("solid_print_ops.py", "<listcomp>")}
+                   ("solid_print_ops.py", "<listcomp>"), ("pattern_ops.py", "start"), ("pattern_ops.py", "step"),
+                   ("pattern_ops.py", "_reference"), ("pattern_ops.py", "compute_pattern"),
+                   ("pattern_ops.py", "<listcomp>"), ("pattern_ops.py", "<genexpr>"), ("pattern_ops.py", "<lambda>"),
+                   ("pattern_ops.py", "check_unfold_budget")}
         bad = []
         for path, fn in self.calls:
             if "/bolus_addon/core/" in path:
@@ -406,13 +410,32 @@ def modal_run(bpy, name, props, cancel_first=True):
     return op
 
 
+def _untimed(v):
+    """JSON data without the run times ("seconds": the pattern table's per island)."""
+    if isinstance(v, dict):
+        return {k: _untimed(x) for k, x in v.items() if k != "seconds"}
+    if isinstance(v, list):
+        return [_untimed(x) for x in v]
+    return v
+
+
+def _prop(v, name):
+    if hasattr(v, "to_list"):
+        return v.to_list()
+    if not isinstance(v, str):
+        return v
+    v = v.replace(name, "skinX")
+    try:
+        return _untimed(json.loads(v))
+    except ValueError:
+        return v
+
+
 def normalised(snapshot, name: str):
     """An object_snapshot with the twin's name ('skinA' / 'skinB') in its string properties as
-    'skinX', and ID property arrays as lists."""
+    'skinX', JSON tables without run times, and ID property arrays as lists."""
     mesh, attrs, props, M, colors = snapshot
-    props = {k: (v.replace(name, "skinX") if isinstance(v, str) else v.to_list() if hasattr(v, "to_list") else v)
-             for k, v in props.items()}
-    return mesh, attrs, props, M, colors
+    return mesh, attrs, {k: _prop(v, name) for k, v in props.items()}, M, colors
 
 
 def assert_same_result(a, b):
@@ -430,6 +453,7 @@ def twins(bpy, make):
     ("smooth_cuts", {}, [("segment", {"patches": 3})]),
     ("print_segment", {"parts": 2}, []),
     ("orient_parts", {}, [("print_segment", {"parts": 2})]),
+    ("unfold", {"max_el": 2.0, "sheet_thickness_mm": 1.0}, [("segment", {"patches": 3})]),
 ])
 def test_surface_operators_threaded_as_executed(bpy_addon, scene, name, props, before):
     """The threaded run gives what execute gives (bit for bit), a cancelled one changes nothing."""
@@ -444,6 +468,8 @@ def test_surface_operators_threaded_as_executed(bpy_addon, scene, name, props, b
     activate(bpy, b)
     assert getattr(bpy.ops.bolus, name)(**props) == {"FINISHED"}
     assert_same_result(a, b)
+    if name == "unfold":
+        assert_same_result(bpy.data.objects["skinA_pattern"], bpy.data.objects["skinB_pattern"])
     if name == "orient_parts":
         for k in range(2):
             pa, pb = bpy.data.objects[f"skinA_part_{k}"], bpy.data.objects[f"skinB_part_{k}"]
