@@ -459,7 +459,8 @@ EXPECT: dict[str, dict[str, str]] = {
         "smooth_cuts": NO_PATCHES,
         "improve_flattenability": r"the region has no interior vertices: every vertex is on its border, which stays "
                                   r"fixed, so nothing can move \(select a larger area\)",
-        "unfold": r"patch 0: the patch has 1 triangle\(s\); at least 3 are needed",
+        "unfold": r"patch 0: the patch has 1 triangle\(s\); at least 3 are needed to unfold it: segment into fewer "
+                  r"patches or select a larger region",
         "export_pattern": NO_PATTERN,
         "print_segment": r"the mesh has 1 faces, fewer than the 2 parts asked: ask for at most 1 or select a larger "
                          r"region",

@@ -771,7 +771,10 @@ def sheet_pieces(V, F, max_el: float = 0.02, *, max_pieces: int = MAX_PIECES, si
     if max_el == 0:
         u = unfold_patch(V, F, method=method, refine_rounds=refine_rounds, progress=progress)
         return SheetPieces(np.zeros(len(F), dtype=np.int64), [u], [], [], True, "", time.perf_counter() - t0)
-    check_mesh(V, F, "the patch", nondegenerate=True, manifold=True, min_faces=3)
+    if len(F) < 3:
+        raise BolusError(f"the patch has {len(F)} triangle(s); at least 3 are needed to unfold it: segment into "
+                         "fewer patches or select a larger region")
+    check_mesh(V, F, "the patch", nondegenerate=True, manifold=True)
     _check_winding(F)
     groups = _check_groups(face_groups, len(F))
     run = _Run(V, F, max_el, int(max_pieces), float(sigma_mm), method, refine_rounds, progress, groups)
