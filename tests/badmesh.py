@@ -4,7 +4,7 @@ Every case is a small skin-like surface (a bumpy 60 mm dome in a 1 unit = 1 mm s
 from quads) with one kind of damage that planning systems and scanners hand over.
 `CASES` maps a name to a builder ``build(bpy) -> Case``; the builder leaves the object active,
 selected and, for the Edit Mode case, in Edit Mode.  `arrays(...)` gives the polygon lists
-without bpy (for core tests).  The 1M-face case (`big_mesh`) is for ``make fuzz`` only.
+without bpy (for core tests).  (The 1M-face mesh of the issue is the scale and range-scan benchmarks'.)
 
 What each case is (vertex / face indices are Blender's, as the messages name them):
 
@@ -279,8 +279,3 @@ CASES.update({
     "edit_nothing_selected": _edit_nothing_selected,
     "nan": _nan,
 })
-
-
-def big_mesh(n_quads_side: int = 708):
-    """About 1M triangles (n^2 quads, 2 n^2 triangles; 708 -> 1.0M): the dome, finely gridded."""
-    return dome(n_quads_side, 300.0)
