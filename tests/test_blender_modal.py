@@ -186,7 +186,8 @@ def test_esc_cancels_at_once_and_the_worker_stops(bpy_addon, key):
     assert op.invoke(ctx, event("LEFTMOUSE")) == {"RUNNING_MODAL"}
     worker, job = op._worker, op._job
     assert op.modal(ctx, event(key)) == {"CANCELLED"}  # while the worker is busy
-    assert op.reports == [({"WARNING"}, f"Dummy Step cancelled: '{ctx.active_object.name if ctx.active_object else 'the mesh'}' unchanged")]
+    source = ctx.active_object.name if ctx.active_object else "the mesh"
+    assert op.reports == [({"WARNING"}, f"Dummy Step cancelled: '{source}' unchanged")]
     assert wm.timers == [] and wm.bar == 0 and ctx.area.texts[-1] is None
     job.go.set()  # the abandoned worker stops at its next progress call
     worker.thread.join(30)
