@@ -219,6 +219,7 @@ class BolusOperator:
             return job
         obj = getattr(context, "active_object", None)
         self._source_name = obj.name if obj is not None else "the mesh"
+        self._source_size = _mesh_size(obj)
         self._job = job
         self._worker = Worker(type(self).compute, job)
         self.start_modal(context, MODAL_PERIOD_S)
@@ -247,6 +248,11 @@ class BolusOperator:
         self._worker = None
         if worker.error is not None:  # reported by the guard (BolusError: its message)
             raise worker.error
+        obj = getattr(context, "active_object", None)
+        if self._source_size is not None and (obj is None or obj.name != self._source_name
+                                              or _mesh_size(obj) != self._source_size):
+            raise BolusError(f"'{self._source_name}' changed while {self.bl_label} was computing: nothing was "
+                             "written; run it again")
         return self.finish(context, self._job, worker.result)
 
     def execute(self, context):
@@ -313,6 +319,15 @@ def operator_name(op) -> str:
     """'bolus.unfold' (Blender shows a registered operator's bl_idname as 'BOLUS_OT_unfold')."""
     head, sep, tail = op.bl_idname.partition("_OT_")
     return f"{head.lower()}.{tail}" if sep else op.bl_idname
+
+
+def _mesh_size(obj) -> tuple | None:
+    """(vertices, edges, polygons) of a mesh object's data, else None: a threaded run checks that
+    its source did not change under it before writing."""
+    if obj is None or getattr(obj, "type", None) != "MESH":
+        return None
+    me = obj.data
+    return len(me.vertices), len(me.edges), len(me.polygons)
 
 
 def _status_text(context, text) -> None:

@@ -211,6 +211,25 @@ def test_errors_in_the_worker_are_reported(bpy_addon, fail):
     assert ctx.window_manager.timers == [] and ctx.window_manager.bar == 0
 
 
+def test_a_source_changed_under_the_worker_is_not_written(bpy_addon, scene):
+    """The mesh must not change while the worker computes from it (every event but view navigation
+    is held); if it did anyway (a script, another add-on's timer), nothing is written."""
+    bpy = bpy_addon
+    ob = bump(bpy, "skinA", n=4)
+    Dummy = dummy_class(bpy_addon)
+    ctx, op = Ctx(bpy), Dummy()
+    assert op.invoke(ctx, event("LEFTMOUSE")) == {"RUNNING_MODAL"}
+    ob.data.vertices.add(1)  # "meanwhile"
+    op._job.go.set()
+    assert tick_until_done(op, ctx) == {"CANCELLED"}
+    assert op.finished == [] and op.reports == [
+        ({"ERROR"}, "'skinA' changed while Dummy Step was computing: nothing was written; run it again")]
+    ctx, op = Ctx(bpy), Dummy()  # unchanged: written
+    assert op.invoke(ctx, event("LEFTMOUSE")) == {"RUNNING_MODAL"}
+    op._job.go.set()
+    assert tick_until_done(op, ctx) == {"FINISHED"} and len(op.finished) == 1
+
+
 def test_without_a_window_and_with_nothing_to_do(bpy_addon):
     """No window (background, bpy as a module): invoke runs execute, compute in the main thread;
     prepare may end the run itself (no thread, no timer)."""
