@@ -9,8 +9,11 @@ message each refusal must match).  "Unexpected error" (a traceback caught by Bol
 is always a failure.  The source's coordinates, topology, seams, attributes, custom
 properties and transform stay as they were, except what the operator exists to write
 (`WRITES`); for those operators Ctrl+Z (``ed.undo``) gives the source back bit for bit and
-``ed.redo`` gives the result back.  The object's mode is kept (Edit Mode stays Edit Mode;
-Select Treatment Area ends in Edit Mode by design).
+``ed.redo`` gives the result back (in Edit Mode Blender's undo step holds the mesh only, not
+the object's custom properties: there the mesh is compared).  The object's mode and its Edit
+Mode selection are kept (Select Treatment Area ends in Edit Mode with its area selected, by
+design).  What the operators read of a mesh with modifiers is its mesh data, without them (a
+warning says so), and the pattern's area is the source's in world space (scale, rotation).
 
 The run writes a tally ``N finished, M refused, 0 unexpected`` and the table case x operator
 to ``corpus_tally.json`` in pytest's temporary folder (printed by `test_tally`).
@@ -189,10 +192,6 @@ def _closed(F) -> tuple[int, int, int]:
     inv = inv.ravel()
     fwd = np.bincount(inv, weights=(he[:, 0] < he[:, 1]).astype(float), minlength=len(uk))
     return int((cnt == 1).sum()), int((cnt > 2).sum()), int(((cnt == 2) & (fwd != 1)).sum())
-
-
-def _region_polys(ob, case_mode):
-    return np.ones(len(ob.data.polygons), dtype=bool)
 
 
 def check_valid(bpy, op, ob, tmp_path, kw) -> None:
