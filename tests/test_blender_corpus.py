@@ -82,6 +82,8 @@ def one_blas_thread():
     with threadpoolctl.threadpool_limits(1):
         yield
 
+#: per case and operator: the warnings and the seconds (with the undo / redo check)
+DETAIL: dict[str, dict] = {}
 TIMES: dict = {}
 
 
@@ -522,15 +524,15 @@ def test_corpus_case(bpy_addon, scene, tmp_path, name, capfd):
     bpy = bpy_addon
     case, results, problems = run_chain(bpy, name, tmp_path, capfd)
     TALLY[name] = {op: (s if s != "REFUSED" else f"refused: {m}") for op, (s, m, _) in results.items()}
-    with capfd.disabled():
-        print(f"\n[{name}]")
-        for op, (s, m, w) in results.items():
-            print(f"  {op:24s} {s} {m[:300]}")
-            for x in w:
-                print(f"  {'':24s}   warning: {x[:200]}")
-        for p in problems:
-            print("  PROBLEM:", p)
-        print("  times:", {k[1:]: round(v, 2) for k, v in TIMES.items() if k[0] == name})
+    DETAIL[name] = {op: {"warnings": w, "seconds": round(TIMES[(name, op)], 3)} for op, (_, _, w) in results.items()}
+    # the case's table (pytest shows it when the test fails)
+    print(f"\n[{name}]")
+    for op, (s, m, w) in results.items():
+        print(f"  {op:24s} {s} {m}")
+        for x in w:
+            print(f"  {'':24s}   warning: {x}")
+    for p in problems:
+        print("  PROBLEM:", p)
     unexpected = {op: m for op, (s, m, _) in results.items() if s not in ("FINISHED", "REFUSED")}
     assert not unexpected, unexpected
     assert not problems, problems
@@ -556,7 +558,7 @@ def test_tally(tmp_path_factory, capfd):
     unexp = len(cells) - fin - ref
     summary = f"{fin} finished, {ref} refused, {unexp} unexpected ({len(TALLY)} cases x {len(OPS)} operators)"
     path = tmp_path_factory.getbasetemp() / "corpus_tally.json"
-    path.write_text(json.dumps({"summary": summary, "table": TALLY}, indent=1))
+    path.write_text(json.dumps({"summary": summary, "table": TALLY, "detail": DETAIL}, indent=1))
     with capfd.disabled():
         print(f"\ncorpus tally: {summary}; table in {path}")
     assert unexp == 0
