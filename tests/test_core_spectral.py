@@ -1,6 +1,7 @@
 """Spectral segmentation, eqs. 3-3..3-8 and 4-5."""
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from meshgen import grid, icosphere, sheet_with_dome
 
 from bolus_addon.core.errors import BolusError
@@ -248,3 +249,142 @@ def test_gaussian_weights_clip_and_regular_mesh():
     assert w[3] == pytest.approx(np.exp(-4.5))  # the floor: the graph cannot fall apart numerically
     np.testing.assert_array_equal(gaussian_weights(np.zeros(5)), np.ones(5))
     assert gaussian_weights(np.zeros(0)).shape == (0,)
+
+
+# ---------------------------------------------------------------- issue 14 point 3: scale
+
+
+def _matched_share(a, b, weights=None):
+    """Share (by weight) of items whose labels agree after the best matching of labels."""
+    from scipy.optimize import linear_sum_assignment
+
+    w = np.ones(len(a)) if weights is None else weights
+    p = int(max(a.max(), b.max())) + 1
+    C = np.zeros((p, p))
+    np.add.at(C, (a, b), w)
+    r, c = linear_sum_assignment(-C)
+    return C[r, c].sum() / w.sum()
+
+
+@pytest.mark.parametrize("k", [2, 3, 5])
+def test_patch_stats_on_matches_patch_stats(k):
+    """The patch table from the region's flattenability equals the one measured on a
+    mesh per patch (the path `segment` takes on a manifold region)."""
+    from bolus_addon.core.spectral import patch_stats, patch_stats_on
+
+    V, F, _ = sheet_with_dome(n_sheet=10, n_dome=8, na=32)
+    ana = analyse(V, F, 3.0)
+    labels = segment(V, F, k, smoothing_mm=3.0, rng=1).face_labels
+    slow = patch_stats(ana.V_analysis, F, labels, V)
+    fast = patch_stats_on(MeshTopology(V, F), labels, ana.varpi)
+    assert len(slow) == len(fast) == labels.max() + 1
+    for a, b in zip(slow, fast):
+        assert (a.patch, a.vertices, a.edges, a.faces) == (b.patch, b.vertices, b.edges, b.faces)
+        assert b.area_mm2 == pytest.approx(a.area_mm2, rel=1e-12)
+        assert b.sum_varpi == pytest.approx(a.sum_varpi, rel=1e-9, abs=1e-12)
+        assert b.flv == pytest.approx(a.flv, rel=1e-9)
+
+
+@pytest.mark.parametrize("name", ["coincident", "collinear", "needle", "nonmanifold"])
+def test_patch_stats_on_degenerate_meshes(name):
+    """patch_stats_on takes no angles: sound (finite) on zero-area and needle triangles,
+    a region with non-manifold vertices (the extra triangle of "nonmanifold" on an edge,
+    of "collinear" hanging from one vertex) is refused by name (NaN/inf never reach it:
+    MeshTopology refuses them)."""
+    from bolus_addon.core.spectral import patch_stats_on
+
+    V, F = grid(8, 8, 80.0)
+    Vd, Fd, _ = degenerate_variants(V, F)[name]
+    topo = MeshTopology(Vd, Fd)
+    labels = (topo.centroids[:, 0] > 40.0).astype(np.int64)
+    varpi = np.abs(np.sin(np.arange(topo.n)))
+    if name in ("nonmanifold", "collinear"):
+        assert topo.nonmanifold_vertices.any()
+        with pytest.raises(BolusError, match="non-manifold"):
+            patch_stats_on(topo, labels, varpi)
+        return
+    rows = patch_stats_on(topo, labels, varpi)
+    assert len(rows) == 2 and all(np.isfinite([r.area_mm2, r.sum_varpi, r.flv]).all() for r in rows)
+    assert sum(r.faces for r in rows) == len(Fd)
+
+
+def test_segment_reuses_the_given_analysis():
+    """segment(analysis=...) takes the preview instead of recomputing it: the same patches
+    from the SaliencyResult or the stored (varpi, saliency) pair; a different saliency
+    changes the result (it is used); wrong shapes and values are refused."""
+    V, F, _ = sheet_with_dome(n_sheet=10, n_dome=8, na=32)
+    ref = segment(V, F, 3, smoothing_mm=3.0, rng=0)
+    ana = analyse(V, F, 3.0)
+    for given in (ana, (ana.varpi, ana.saliency)):
+        seg = segment(V, F, 3, smoothing_mm=3.0, rng=0, analysis=given)
+        np.testing.assert_array_equal(seg.face_labels, ref.face_labels)
+        for a, b in zip(ref.patches, seg.patches):
+            assert b.sum_varpi == pytest.approx(a.sum_varpi, rel=1e-12)
+    # float32 copies (what a Blender attribute holds) give the same spectrum, but on this
+    # rotationally symmetric mesh (lambda_2 = lambda_3) k-means may cut the dome at another
+    # angle: why the operator reuses the preview's float64 arrays, not its attributes
+    f32 = segment(V, F, 3, smoothing_mm=3.0, rng=0, analysis=(ana.varpi.astype(np.float32),
+                                                                ana.saliency.astype(np.float32)))
+    np.testing.assert_allclose(f32.eigenvalues[1:], ref.eigenvalues[1:], rtol=1e-6)
+    raw = analyse(V, F, 0.0)  # another smoothing: another saliency, other weights
+    other = segment(V, F, 3, smoothing_mm=3.0, rng=0, analysis=(raw.varpi, raw.saliency))
+    assert not np.allclose(other.embedding, ref.embedding, atol=1e-6)
+    with pytest.raises(BolusError, match="one value per vertex"):
+        segment(V, F, 3, analysis=(ana.varpi[:-1], ana.saliency[:-1]))
+    bad = ana.saliency.copy()
+    bad[3] = np.nan
+    with pytest.raises(BolusError, match="finite"):
+        segment(V, F, 3, analysis=(ana.varpi, bad))
+    with pytest.raises(BolusError, match="pair"):
+        segment(V, F, 3, analysis=ana.varpi)
+
+
+def _salient_laplacian():
+    V, F, _ = sheet_with_dome(n_sheet=40, n_dome=30, na=96)
+    t = MeshTopology(V, F)
+    return V, F, graph_laplacian(affinity(t, analyse(V, F, 3.0).saliency, eta=5.0))
+
+
+def test_aggregates_are_connected_through_strong_edges():
+    from scipy.sparse.csgraph import connected_components
+
+    from bolus_addon.core.spectral import STRONG_WEIGHT, aggregate_vertices
+
+    V, F, L = _salient_laplacian()
+    nc, agg = aggregate_vertices(L, V)
+    assert 10 < nc < len(V) / 8
+    T = sp.triu(L, 1).tocoo()
+    i, j, w = T.row, T.col, -T.data
+    inner = (agg[i] == agg[j]) & (w >= STRONG_WEIGHT)
+    G = sp.coo_matrix((np.ones(inner.sum()), (i[inner], j[inner])), shape=L.shape)
+    assert connected_components(G, directed=False)[0] == nc  # each aggregate: one piece joined by strong edges
+
+
+def test_multilevel_eigenvectors_match_shift_invert():
+    from bolus_addon.core.spectral import multilevel_eigenvectors
+
+    V, F, L = _salient_laplacian()
+    exact_vals, exact = smallest_eigenvectors(L, 4, rng=0)
+    vals, U = multilevel_eigenvectors(L, 4, V, rng=0)
+    np.testing.assert_allclose(vals, exact_vals, rtol=1e-4, atol=1e-12)
+    np.testing.assert_allclose(U.T @ U, np.eye(4), atol=1e-8)
+    cos = np.linalg.svd(exact.T @ U, compute_uv=False)
+    assert cos.min() > 1 - 1e-6  # the same subspace
+    again = multilevel_eigenvectors(L, 4, V, rng=0)[1]
+    np.testing.assert_array_equal(again, U)  # deterministic
+
+
+def test_segment_coarse_to_fine_gives_the_same_patches(monkeypatch):
+    """Above MULTILEVEL_MIN_VERTICES segment solves coarse to fine; on a mesh forced down
+    that path the patches are those of the exact eigenvectors (on a stretched mesh: on a
+    round one lambda_2 = lambda_3 and any rotation of the cut is as good)."""
+    from bolus_addon.core import spectral
+
+    V, F, _ = sheet_with_dome(n_sheet=40, n_dome=30, na=96)
+    V = V * [1.4, 1.0, 1.0]
+    exact = segment(V, F, 3, smoothing_mm=3.0, rng=0)
+    monkeypatch.setattr(spectral, "MULTILEVEL_MIN_VERTICES", 1000)
+    fast = segment(V, F, 3, smoothing_mm=3.0, rng=0)
+    t = MeshTopology(V, F)
+    assert _matched_share(exact.face_labels, fast.face_labels, t.areas) > 0.999
+    np.testing.assert_allclose(fast.eigenvalues, exact.eigenvalues, rtol=1e-4, atol=1e-12)
