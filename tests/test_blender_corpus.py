@@ -467,14 +467,15 @@ EXPECT: dict[str, dict[str, str]] = {
                          r"region",
     },
     "flipped_normals": {
-        "improve_flattenability": r"the region's faces are not consistently oriented \(\d+ of its \d+ triangles point "
+        "improve_flattenability": r"the region's faces are not consistently oriented \(\d+ of its \d+ triangles points? "
                                   r"the other way\), so 'outward' is not defined: recalculate the normals first "
                                   r"\(Mesh > Normals > Recalculate Outside\)",
-        "unfold": r"patch \d: the patch's faces are not consistently oriented \(\d+ of its \d+ triangles point the "
+        "unfold": r"patch \d: the patch's faces are not consistently oriented \(\d+ of its \d+ triangles points? the "
                   r"other way\): recalculate the normals first \(Mesh > Normals > Recalculate Outside\)",
         "export_pattern": NO_PATTERN,
-        "make_shell": r"the region's faces are not consistently oriented \(at the edge between vertices \d+ and \d+, "
-                      r"triangle \d+\): recalculate the normals \(Mesh > Normals > Recalculate Outside\)",
+        "make_shell": r"the region's faces are not consistently oriented \(\d+ of its \d+ triangles points? the other "
+                      r"way; e\.g\. at the edge between vertices \d+ and \d+\): recalculate the normals \(Mesh > "
+                      r"Normals > Recalculate Outside\)",
     },
     "nan": {
         **{op: NAN for op in ("saliency_preview", "segment", "improve_flattenability", "unfold", "make_shell",
@@ -513,6 +514,9 @@ def test_misoriented_faces():
     bad = misoriented_faces(tris(Q))
     np.testing.assert_array_equal(np.nonzero(bad)[0], np.arange(140, 200))  # the 30 turned quads 70..99
     assert misoriented_text(tris(Q)) == "60 of its 200 triangles point the other way"
+    one = F.copy()
+    one[7] = one[7, ::-1]
+    assert misoriented_text(one) == "1 of its 200 triangles points the other way"
     assert not misoriented_faces(np.r_[F, F[::-1, ::-1] + F.max() + 1]).any()  # two pieces, each consistent
     n = 8  # a Moebius strip cannot be wound consistently: every triangle is flagged
     Q = [[k, n + k, n + k + 1, k + 1] for k in range(n - 1)] + [[n - 1, 2 * n - 1, 0, n]]

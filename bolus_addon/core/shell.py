@@ -63,7 +63,7 @@ from .shell_grid import (  # noqa: F401  (the grid helpers are also reached as s
     _tight_box,
 )
 from .solid import SIDE_INNER, SIDE_OUTER, SIDE_RIM, from_manifold, ray_thickness, to_manifold
-from .topology import as_mesh_arrays, check_mesh
+from .topology import as_mesh_arrays, check_mesh, misoriented_text
 
 __all__ = ["Shell", "check_shell_request", "make_shell", "MAX_THICKNESS_MM", "MAX_GRID_POINTS"]
 
@@ -512,6 +512,6 @@ def _check_region(skin):
     bad = pair & (fs[1:] == fs[:-1])
     if bad.any():
         k = int(ks[1:][bad][0])
-        f = int(np.repeat(np.arange(len(F)), 3)[order][1:][bad][0])
-        raise BolusError(f"the region's faces are not consistently oriented (at the edge between vertices {k // n} and "
-                         f"{k % n}, triangle {f}): recalculate the normals (Mesh > Normals > Recalculate Outside)")
+        raise BolusError(f"the region's faces are not consistently oriented ({misoriented_text(F)}; e.g. at the edge "
+                         f"between vertices {k // n} and {k % n}): recalculate the normals (Mesh > Normals > "
+                         "Recalculate Outside)")

@@ -208,7 +208,7 @@ def misoriented_text(F) -> str:
     """'12 of its 200 triangles point the other way' (`misoriented_faces`) for a refusal."""
     k = int(misoriented_faces(F).sum())
     m = len(np.asarray(F).reshape(-1, 3))
-    return f"{k} of its {m} triangles point the other way"
+    return f"{k} of its {m} triangles point{'s' if k == 1 else ''} the other way"
 
 
 def _face_cross(V: np.ndarray, F: np.ndarray) -> np.ndarray:
