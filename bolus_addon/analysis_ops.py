@@ -10,7 +10,7 @@ import numpy as np
 
 from . import mesh_io
 from .core.colormap import categorical_linear_rgba, outside_linear_rgba, scalar_to_linear_rgba
-from .core.saliency import analyse
+from .core.saliency import analyse, analysis_key
 from .core.spectral import segment
 from .operators import (
     ATTR_FLATTENABILITY,
@@ -31,6 +31,26 @@ from .properties import (
     seed_property,
     smoothing_property,
 )
+
+
+#: The last preview's float64 (varpi, saliency), under `analysis_key` of its region and
+#: smoothing: `bolus.segment` on the same region and smoothing reuses them instead of
+#: recomputing (at 1.12M triangles 17-20 s of the segment's 69 s).  Kept in memory, not
+#: read back from the attributes: those are float32, and on a symmetric mesh the rounding
+#: can turn the cut (tests/test_core_spectral.py::test_segment_reuses_the_given_analysis).
+#: The key hashes the region's exact coordinates and triangles, so any edit, another
+#: selection or another smoothing misses and segment recomputes.
+LAST_PREVIEW: dict = {}
+
+
+def remember_preview(V, F, smoothing_mm: float, res) -> None:
+    LAST_PREVIEW.clear()
+    LAST_PREVIEW[analysis_key(V, F, smoothing_mm)] = (res.varpi.copy(), res.saliency.copy())
+
+
+def recall_preview(V, F, smoothing_mm: float):
+    """(varpi, saliency) of the last preview when it was taken on exactly (V, F, smoothing), else None."""
+    return LAST_PREVIEW.get(analysis_key(V, F, smoothing_mm)) if LAST_PREVIEW else None
 
 
 def show_attribute_colors(context) -> None:
@@ -79,6 +99,7 @@ class BOLUS_OT_saliency_preview(BolusOperator, bpy.types.Operator):
             me.update()
         obj[PROP_SUM_VARPI] = res.sum_varpi
         obj[PROP_FLV] = res.flv
+        remember_preview(region.V, region.F, job.smoothing_mm, res)
         show_attribute_colors(context)
         self.warn_all(warnings)
         where = "selected faces" if region.selection_only else "whole mesh"
@@ -120,7 +141,8 @@ class BOLUS_OT_segment(BolusOperator, bpy.types.Operator):
         region, topo, warnings = self.read_region(context, allow_nonmanifold=False)
         return SimpleNamespace(region=region, topo=topo, warnings=warnings, patches=int(self.patches),
                                eta=float(self.eta), smoothing_mm=float(self.smoothing_mm), seed=int(self.seed),
-                               method=self.method.lower())
+                               method=self.method.lower(),
+                               analysis=recall_preview(region.V, region.F, float(self.smoothing_mm)))
 
     @staticmethod
     def compute(job, progress):
@@ -136,6 +158,7 @@ class BOLUS_OT_segment(BolusOperator, bpy.types.Operator):
             face_groups=region.tri_poly,
             progress=lambda f, t: progress(0.9 * f, t),
             topo=job.topo,
+            analysis=job.analysis,
         )
 
     def finish(self, context, job, seg):

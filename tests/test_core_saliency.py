@@ -105,3 +105,19 @@ def test_bad_smoothing_scale(bad):
     V, F = grid(3, 3)
     with pytest.raises(BolusError, match="smoothing"):
         analyse(V, F, bad)
+
+
+def test_analysis_key_changes_with_anything_the_analysis_depends_on():
+    """segment reuses a preview only under an equal key (issue 14 point 3): the key follows
+    the exact coordinates, the triangles and the smoothing, not the array types."""
+    from bolus_addon.core.saliency import analysis_key
+
+    V, F = _noisy_cap(0.1)
+    k = analysis_key(V, F, 3.0)
+    assert k == analysis_key(V.copy(), F.astype(np.int32), 3)  # same values, other dtypes
+    V2 = V.copy()
+    V2[7, 2] = np.nextafter(V2[7, 2], np.inf)
+    F2 = F.copy()
+    F2[0] = F2[0, [1, 2, 0]]  # same triangle, other first corner: other bytes, a new analysis
+    assert len({k, analysis_key(V2, F, 3.0), analysis_key(V, F2, 3.0), analysis_key(V, F, 2.0),
+                analysis_key(V[:-1], F[:-1], 3.0)}) == 5

@@ -27,6 +27,7 @@ does not shrink.
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,6 +47,7 @@ __all__ = [
     "lumped_mass",
     "smooth_for_analysis",
     "analyse",
+    "analysis_key",
 ]
 
 #: Default analysis smoothing scale (mm).  Chosen on scanned faces: at 3 mm the
@@ -202,6 +204,19 @@ def analyse(V, F, smoothing_mm: float = 0.0, topo: MeshTopology | None = None) -
     sal = segmentation_saliency(topo, theta)
     total = float(varpi.sum())
     return SaliencyResult(theta, varpi, sal, total, flattenability_value(total), float(smoothing_mm), Vs)
+
+
+def analysis_key(V, F, smoothing_mm: float) -> str:
+    """A fingerprint of what `analyse` depends on: the vertices (n,3) and triangles (m,3)
+    (exact bytes, as float64 / int64) and the smoothing scale.  Equal keys: equal analyses
+    (`analyse` is deterministic), so a caller may reuse one (`spectral.segment(analysis=)`)."""
+    h = hashlib.blake2b(digest_size=20)
+    V = np.ascontiguousarray(V, dtype=np.float64)
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    for part in (repr(V.shape).encode(), V.tobytes(), repr(F.shape).encode(), F.tobytes(),
+                 repr(float(smoothing_mm)).encode()):
+        h.update(part)
+    return h.hexdigest()
 
 
 def corner_angle_sums(Vs: np.ndarray, topo: MeshTopology) -> np.ndarray:
