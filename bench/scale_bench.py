@@ -19,7 +19,10 @@ Steps (each (step, size) in a fresh child process of its own, ``--worker``: its 
 the mesh is built once by the parent and handed over as a .npz file):
 
 * ``preview``: ``saliency.analyse(V, F, 3.0)`` on the whole size mesh (the preview operator's core);
-* ``segment``: ``spectral.segment(V, F, 3, eta=5, smoothing_mm=3, rng=0)`` on the whole size mesh;
+* ``segment``: ``spectral.segment(V, F, 3, eta=5, smoothing_mm=3, rng=0, analysis=preview)`` on the whole
+  size mesh, given the preview's result (computed first, untimed, as the add-on's segment operator reuses the
+  last preview of the same region and smoothing);
+* ``segment_alone`` (only when asked with ``--steps``): the same without the preview, i.e. computing it;
 * ``cuts``: ``cutlines.smooth_cuts`` on a crop of n/5 triangles of the same density (200k at 1M), its
   labels from ``spectral.segment(.., 3)`` of that crop first (not timed, its memory peak reset);
 * ``unfold``: ``unfold.unfold_patch(V, F)`` (defaults) on a crop of n/20 triangles (50k at 1M);
@@ -51,6 +54,7 @@ from benchutil import SHARED_MESHES, Table
 SIZES = {"10k": (0, 10_000), "100k": (1, 100_000), "1M": (2, None)}  # (times subdivided, crop to n faces)
 QUICK_SIZES = ("10k", "100k")
 STEPS = ("preview", "segment", "cuts", "unfold", "shell", "orient")
+EXTRA_STEPS = ("segment_alone",)  # run only when named in --steps
 CUT_SHARE, UNFOLD_SHARE = 5, 20  # regions of n/5 and n/20 triangles
 FACE_RADIUS_MM = 100.0
 SMOOTHING_MM, PATCHES, ETA = 3.0, 3, 5.0
@@ -104,7 +108,7 @@ def build_inputs(sizes, steps, folder: Path) -> dict:
         how_size = f"nefertiti x{4 ** level} ({len(FL)} tri)" + ("" if n is None else f", crop {n_size} tri")
         out[("size", size)] = (None, n_size, how_size)
         for step in steps:
-            if step in ("preview", "segment"):
+            if step in ("preview", "segment", "segment_alone"):
                 V, F, how = Vs, Fs, how_size
             elif step in ("cuts", "orient"):
                 V, F = crop(VL, FL, tip, n_size // CUT_SHARE)
@@ -148,6 +152,10 @@ def worker(step: str, path: str) -> dict:
     if step == "preview":
         call = lambda: saliency.analyse(V, F, SMOOTHING_MM)  # noqa: E731
     elif step == "segment":
+        ana = saliency.analyse(V, F, SMOOTHING_MM)  # the preview, untimed (its peak is reset below)
+        call = lambda: spectral.segment(V, F, PATCHES, eta=ETA, smoothing_mm=SMOOTHING_MM, rng=0,  # noqa: E731
+                                        analysis=ana)
+    elif step == "segment_alone":
         call = lambda: spectral.segment(V, F, PATCHES, eta=ETA, smoothing_mm=SMOOTHING_MM, rng=0)  # noqa: E731
     elif step == "cuts":
         labels = spectral.segment(V, F, PATCHES, eta=ETA, smoothing_mm=SMOOTHING_MM, rng=0).face_labels
@@ -167,7 +175,7 @@ def worker(step: str, path: str) -> dict:
     res = call()
     dt = time.perf_counter() - t0
     peak = _vm("VmHWM")
-    if step == "segment":
+    if step in ("segment", "segment_alone"):
         note = f"{len(np.unique(res.face_labels))} patches"
     elif step == "cuts":
         note = f"{len(res.F)} tri out"
@@ -250,7 +258,8 @@ def legend() -> str:
             f"between two sizes (1 = linear; above {SUPERLINEAR:g} flagged SUPER-LINEAR; small sizes are "
             "dominated by fixed costs, so the 100k->1M slope is the telling one). "
             f"preview = saliency.analyse(V, F, {SMOOTHING_MM:g}); segment = spectral.segment(V, F, {PATCHES}, "
-            f"eta={ETA:g}, smoothing_mm={SMOOTHING_MM:g}, rng=0); cuts = cutlines.smooth_cuts on an n/{CUT_SHARE} "
+            f"eta={ETA:g}, smoothing_mm={SMOOTHING_MM:g}, rng=0, analysis=the preview's result, computed first "
+            f"and untimed, as the segment operator reuses the last preview; segment_alone: without it); cuts = cutlines.smooth_cuts on an n/{CUT_SHARE} "
             f"crop segmented first (untimed); unfold = unfold.unfold_patch (defaults) on an n/{UNFOLD_SHARE} crop; "
             f"shell = shell.make_shell(thickness={SHELL_T_MM:g}, resolution={SHELL_RES_MM:g}) on the face "
             f"({FACE_RADIUS_MM:g} mm around the nose tip) at the size's density; orient = "
@@ -289,12 +298,13 @@ def main(argv=None) -> int:
         return 0
     ap = benchutil.parser(__doc__, "10k and 100k only", repeat=None)
     ap.add_argument("--sizes", nargs="+", choices=list(SIZES), help="sizes to run (default all, --quick 10k 100k)")
-    ap.add_argument("--steps", nargs="+", choices=STEPS, default=list(STEPS), help="steps to run (default all)")
+    ap.add_argument("--steps", nargs="+", choices=STEPS + EXTRA_STEPS, default=list(STEPS),
+                    help="steps to run (default all but segment_alone)")
     ap.add_argument("--timeout", type=float, default=TIMEOUT_S, help=f"seconds per (step, size) (default {TIMEOUT_S})")
     args = ap.parse_args(argv)
     sizes = args.sizes or (list(QUICK_SIZES) if args.quick else list(SIZES))
     sizes = [s for s in SIZES if s in sizes]
-    steps = [s for s in STEPS if s in args.steps]
+    steps = [s for s in STEPS + EXTRA_STEPS if s in args.steps]
     t_start = time.perf_counter()
     results: dict = {}
     with tempfile.TemporaryDirectory(prefix="scale_bench_") as tmp:
