@@ -19,6 +19,7 @@ from mathutils import Matrix
 
 from . import mesh_io
 from .core.colormap import diverging_linear_rgba
+from .core.budget import check_budget
 from .core.errors import BolusError
 from .core.mid_surface import (check_sheet_thickness, check_thickness, mid_surface, piece_bending,
                                principal_curvatures)
@@ -46,6 +47,15 @@ def check_max_el(max_el_pct: float) -> float:
     if not np.isfinite(max_el_pct) or max_el_pct < 0 or 0 < max_el_pct < 0.1:
         raise BolusError(f"Max EL must be 0 (no darts or splits) or at least 0.1 %, got {max_el_pct:g} %")
     return float(max_el_pct) / 100.0
+
+
+def check_unfold_budget(triangles: int, islands) -> None:
+    """BolusError (figures and what to do) when unfolding islands (m,) (-1: left out) would take
+    longer than the time budget (core.budget, issue 14 point 2)."""
+    sizes = np.bincount(islands[islands >= 0])
+    check_budget("unfold", sizes, f"the region has {triangles:,} triangles in {len(sizes)} islands (the "
+                 "connected pieces of its patches)", "select the treatment area first (Select Treatment Area) and "
+                 "segment it into smaller patches")
 
 
 class _UnfoldJob:
@@ -86,6 +96,7 @@ class _UnfoldJob:
         if self.islands.left_out:  # expected when a region was segmented: said once, as INFO
             self.infos.append(f"{self.islands.left_out} faces outside the segmented patches (bolus_patch = -1) "
                               "were left out of the pattern")
+        check_unfold_budget(len(region.F), self.islands.islands)  # refuse now, not after minutes
         self.V_ref = self._reference(region)
         progress = None if self.progress is None else (lambda f, t="": self.progress(f, t))
         self.iter = iter_sheet_pieces(self.V_ref, region.F, self.islands.islands, max_el=self.max_el,
