@@ -3,7 +3,7 @@ finishes or refuses within a minute (printed, not asserted).
 
 Run from the repository root (bpy in .venv):
 
-    .venv/bin/python bench/rangescan_bench.py                  # both scenarios, every operator
+    .venv/bin/python bench/rangescan_bench.py                  # all three scenarios, every operator
     .venv/bin/python bench/rangescan_bench.py --quick          # the scan at 1/4 size (about 130k faces)
     .venv/bin/python bench/rangescan_bench.py --ops unfold make_shell --scenarios whole
     .venv/bin/python bench/rangescan_bench.py --markdown docs/benchmarks.md   # replace its own section
@@ -12,8 +12,9 @@ The scan (built here, deterministic; ``../shared/meshes`` has no range scan): ``
 (a closed 70k-triangle bust in mm) subdivided twice at the edge midpoints (1,120,000 triangles,
 the surface unchanged); the front as a scanner sees it (the triangles whose centroid is in front
 of a z plane, z = the nose's direction); scan gaps: bands ``GAP_MM`` wide around random planes
-through the surface are removed (with the faces around any non-manifold vertex the cut leaves), a plane at a time (a plane is kept only while the pieces stay
-at most ``PIECES - FRAGMENTS``), until the surface falls into that many edge-connected pieces;
+through the surface are removed (with the faces around any non-manifold vertex the cut
+leaves), a plane at a time (a plane is kept only while the pieces stay at most
+``PIECES - FRAGMENTS``), until the surface falls into that many edge-connected pieces;
 then ``FRAGMENTS`` tiny floating fragments (small discs of the surface copied 2-4 mm off it, as
 spray or a second pass leaves) and Gaussian noise along the vertex normals, sigma drawn per piece
 in ``NOISE_MM``.  The count of edge-connected pieces is checked (17) and the face count printed
@@ -208,7 +209,8 @@ def range_scan(seed: int = SEED, target_faces: int = TARGET_FACES, pieces: int =
         big = np.argmax(np.bincount(cc))
         Vs, Fs = submesh(Vs, Fs, cc == big)
         lift = float(rng.uniform(2.0, 4.0))
-        Vs = Vs + lift * _vertex_normals(Vs, Fs).mean(axis=0) / max(np.linalg.norm(_vertex_normals(Vs, Fs).mean(axis=0)), 1e-12)
+        up = _vertex_normals(Vs, Fs).mean(axis=0)
+        Vs = Vs + lift * up / max(np.linalg.norm(up), 1e-12)
         fragV.append(Vs)
         fragF.append(Fs + off)
         off += len(Vs)

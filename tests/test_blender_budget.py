@@ -7,6 +7,8 @@ over the budget refuses BEFORE the long work, with the figures and what to do.  
 """
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from conftest import assert_same_object, make_object, object_snapshot
@@ -129,3 +131,32 @@ def test_print_segment_refuses_over_budget(bpy_addon, scene, monkeypatch):
     ob = cap_object(bpy, scene)
     refuses_over_budget(bpy, monkeypatch, ob, "print_segment", r"Split into Print Parts would take about .* not "
                         r"started.*Make Bolus", parts=2)
+
+
+def test_make_shell_refuses_over_budget_with_a_resolution_that_fits(monkeypatch):
+    from bolus_addon.core.shell import MIN_VOXELS_ACROSS, make_shell
+
+    V, F = spherical_cap(60.0, 50.0, 4)
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
+    est = budget.estimate_s("make_shell", budget.shell_voxels(area, 5.0, 0.5))
+    assert est > budget.estimate_s("make_shell", budget.shell_voxels(area, 5.0, 1.0))  # finer costs more
+    monkeypatch.setenv(ENV, f"{est / 4:.6f}")
+    with pytest.raises(BolusError, match=r"a 5 mm wall on the region .* cm²\) at 0.5 mm: Make Bolus would take about "
+                                         r".* not started: choose a resolution of ([0-9.]+) mm or coarser") as exc:
+        make_shell(V, F, 5.0, 0.0, 0.5)
+    coarse = float(re.search(r"resolution of ([0-9.]+) mm", str(exc.value)).group(1))
+    assert 0.5 < coarse <= 5.0 / MIN_VOXELS_ACROSS
+    assert budget.check_grid_budget(area, 5.0, coarse, MIN_VOXELS_ACROSS, "x", len(F)) <= est / 4  # it fits
+    # no resolution keeps 4 voxels across the wall within a tiny budget: a smaller region
+    monkeypatch.setenv(ENV, "0.001")
+    with pytest.raises(BolusError, match=r"select a smaller region .* fewer than 4 voxels across the 5 mm wall"):
+        make_shell(V, F, 5.0, 0.0, 0.5)
+
+
+@pytest.mark.blender
+def test_make_shell_operator_refuses_over_budget(bpy_addon, scene, monkeypatch):
+    bpy = bpy_addon
+    ob = cap_object(bpy, scene)
+    refuses_over_budget(bpy, monkeypatch, ob, "make_shell", r"Make Bolus would take about .* not started",
+                        thickness_mm=5.0, resolution_mm=1.25)
+    assert bpy.data.objects.get("cap_bolus") is not None

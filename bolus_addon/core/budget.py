@@ -1,16 +1,18 @@
 """Time budget (issue 14 point 2): an operator finishes or refuses within a minute.
 
-A step whose work grows faster than its input (unfolding a patch, smoothing the cuts of a
-whole scan) estimates its time from the triangle counts BEFORE the long work and refuses
-with the figures and what to do when the estimate is over the budget.  The estimate of a
-job of pieces m_1..m_k triangles (done one after another) is
+A step whose work can run for minutes (unfold, improve flattenability, smooth cut lines, split
+into print parts on a whole scan; Make Bolus at a fine resolution) estimates its time from its
+input's size BEFORE the long work and refuses with the figures and what to do (Select Treatment
+Area, a Decimate ratio or a coarser resolution that fits) when the estimate is over the budget.
+The estimate of a job of pieces m_1..m_k (triangles; for Make Bolus the voxels of the wall's
+band, `shell_voxels`), done one after another, is
 
     t = sum_i  T * (m_i / M) ** p        (seconds)
 
 with (T, M, p) per step in `COSTS`, calibrated on the development machine (2 cores, see
 bench/rangescan_bench.py and docs/benchmarks.md); the budget is `BUDGET_S` seconds, or the
 environment variable ``BOLUS_TIME_BUDGET_S`` (tests lower it; 0 or "off" turns the check off).
-bpy-free.
+`OVERHEAD_S_PER_TRIANGLE` of the region is kept for reading and writing.  bpy-free.
 """
 from __future__ import annotations
 
@@ -21,7 +23,8 @@ import numpy as np
 from .errors import BolusError
 
 __all__ = ["BUDGET_S", "BUDGET_ENV", "COSTS", "budget_s", "estimate_s", "max_triangles", "decimate_ratio",
-           "check_budget"]
+           "check_budget", "check_grid_budget",
+           "grid_resolution_for_budget", "shell_voxels"]
 
 #: seconds an operator may take before it must have refused (issue 14: "within a minute")
 BUDGET_S = 60.0
@@ -39,6 +42,10 @@ COSTS = {
     "improve_flattenability": (47.6, 10_000, 0.74),
     "smooth_cuts": (54.6, 150_000, 1.18),
     "print_segment": (20.0, 120_000, 1.0),
+    # per voxel of the wall's band (area x wall / resolution^3, `shell_voxels`), not triangles:
+    # `shell.make_shell` (10 mm) on the 45 mm nose-tip region of nefertiti x4 (5,580 mm2) at load 2.5:
+    # 1 mm (55.8k) 8.9 s, 0.5 mm (446k) 48.6 s
+    "make_shell": (48.6, 446_000, 0.82),
 }
 #: seconds per triangle of the region an operator spends outside the step (read, check, write)
 OVERHEAD_S_PER_TRIANGLE = 2.0e-5
@@ -115,6 +122,43 @@ def check_budget(step: str, sizes, what: str, advice: str) -> float:
         f"over the {limit:.0f} s budget, so it was not started (one piece of up to about "
         f"{max_triangles(step, room):,} triangles fits in it): {advice}, or decimate the mesh (Decimate modifier, "
         f"ratio {decimate_ratio(step, sizes, room):.2f})")
+
+
+def shell_voxels(area_mm2: float, wall_mm: float, resolution: float) -> float:
+    """The voxels of the wall's band, area x wall / resolution^3: what Make Bolus's work grows with."""
+    return float(area_mm2) * float(wall_mm) / float(resolution) ** 3
+
+
+def grid_resolution_for_budget(area_mm2: float, wall_mm: float, resolution: float, triangles: int = 0):
+    """(estimate s, budget s or None, the coarsest resolution (mm, rounded up to 0.01) that fits
+    the budget or None when this one fits) of Make Bolus on a region of ``area_mm2``."""
+    est = estimate_s("make_shell", shell_voxels(area_mm2, wall_mm, resolution))
+    limit = budget_s()
+    if limit is None:
+        return est, None, None
+    room = max(limit - OVERHEAD_S_PER_TRIANGLE * float(triangles), 0.25 * limit)
+    if est <= room:
+        return est, limit, None
+    _, _, p = _cost("make_shell")
+    coarse = float(resolution) * (est / room) ** (1.0 / (3.0 * p))  # voxels ~ resolution^-3
+    return est, limit, float(np.ceil(coarse * 100.0) / 100.0)
+
+
+def check_grid_budget(area_mm2: float, wall_mm: float, resolution: float, min_voxels: int, what: str,
+                      triangles: int = 0) -> float:
+    """Make Bolus: refuse (BolusError) when a wall of ``wall_mm`` on ``area_mm2`` at ``resolution`` mm
+    would take longer than the budget; the advice is the coarsest resolution that fits (while
+    the wall keeps ``min_voxels`` across), else a smaller region.  Returns the estimate (s)."""
+    est, limit, coarse = grid_resolution_for_budget(area_mm2, wall_mm, resolution, triangles)
+    if coarse is None:
+        return est
+    if coarse <= wall_mm / min_voxels:
+        fix = f"choose a resolution of {coarse:.2f} mm or coarser, or select a smaller region (Select Treatment Area)"
+    else:
+        fix = (f"select a smaller region (Select Treatment Area): the resolution that would fit ({coarse:.2f} mm) "
+               f"leaves fewer than {min_voxels} voxels across the {wall_mm:g} mm wall")
+    raise BolusError(f"{what} at {resolution:g} mm: Make Bolus would take about {_fmt_s(est)} on this computer, over "
+                     f"the {limit:.0f} s budget, so it was not started: {fix}")
 
 
 def _fmt_s(seconds: float) -> str:
