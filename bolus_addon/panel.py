@@ -271,7 +271,9 @@ def draw_preview(layout, g: Guide) -> None:
     col.prop(g.s, "color_by")
     g.button(col, "bolus.saliency_preview", icon="COLOR")
     obj = g.obj
-    if obj is not None and PROP_SUM_VARPI in obj:
+    # the figures only with the attribute they describe: Ctrl+Z in Edit Mode restores the mesh
+    # (attributes) but not the object's custom properties
+    if guide.has_preview(obj) and PROP_SUM_VARPI in obj:
         box.label(text=f"Σϖ = {obj[PROP_SUM_VARPI]:.3f} rad   FLV = {obj[PROP_FLV]:.3g}")
 
 
@@ -284,7 +286,7 @@ def draw_segment(layout, g: Guide) -> None:
     sub.prop(g.s, "seed")
     col.prop(g.s, "method")
     g.button(col, "bolus.segment", icon="MESH_ICOSPHERE")
-    table = mesh_io.json_prop(g.obj, PROP_PATCH_TABLE)
+    table = mesh_io.json_prop(g.obj, PROP_PATCH_TABLE) if guide.has_patches(g.obj) else None
     table = table.get("patches") if isinstance(table, dict) else None
     if table:
         draw_table(box, ("Patch", "Verts", "Tris", "Σϖ", "FLV"), (

@@ -231,3 +231,32 @@ def test_panel_improve_section_and_its_table(bpy_addon, scene):
         assert any(x.startswith(f"{imp.name}: {t['status']}, FLV") for x in labels), labels
         assert "all" in labels and "P0" in labels and "P1" in labels and labels.count("→") == 3
         assert f"{t['whole']['after']['flv']:.3g}" in labels and f"{t['patches'][1]['after']['max_gap_mm']:.2f}" in labels
+
+
+def test_panel_hides_figures_undone_in_edit_mode(bpy_addon, scene):
+    """Ctrl+Z in Edit Mode restores the mesh (its attributes) but not the object's custom
+    properties: the panel must not show the undone preview's Σϖ or the undone patch table."""
+    bpy = bpy_addon
+    V, F = spherical_cap(100.0, 50.0, 3)
+    ob = make_object(bpy, V, F, scale_length=0.001)
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_all(action="SELECT")
+    bpy.ops.ed.undo_push(message="before the preview")
+    assert bpy.ops.bolus.saliency_preview() == {"FINISHED"}
+    bpy.ops.ed.undo_push(message="after the preview")
+    assert bpy.ops.bolus.segment(patches=2) == {"FINISHED"}
+    bpy.ops.ed.undo_push(message="after segment")
+    ob = bpy.data.objects["skin"]
+    table = json.loads(ob["bolus_patch_table"])["patches"]
+    labels = [t for kind, t in draw_panel(bpy) if kind == "label"]
+    assert any(t.startswith("Σϖ =") for t in labels) and str(table[0]["vertices"]) in labels
+    assert bpy.ops.ed.undo() == {"FINISHED"}  # segment undone
+    assert bpy.ops.ed.undo() == {"FINISHED"}  # the preview undone
+    ob = bpy.data.objects["skin"]
+    ob.update_from_editmode()
+    assert "bolus_patch" not in ob.data.attributes and "bolus_flattenability" not in ob.data.attributes
+    assert "bolus_patch_table" in ob  # what makes the check needed: the property stayed
+    labels = [t for kind, t in draw_panel(bpy) if kind == "label"]
+    assert not any(t.startswith("Σϖ =") for t in labels)
+    assert str(table[0]["vertices"]) not in labels
+    bpy.ops.object.mode_set(mode="OBJECT")
