@@ -121,3 +121,10 @@ def test_analysis_key_changes_with_anything_the_analysis_depends_on():
     F2[0] = F2[0, [1, 2, 0]]  # same triangle, other first corner: other bytes, a new analysis
     assert len({k, analysis_key(V2, F, 3.0), analysis_key(V, F2, 3.0), analysis_key(V, F, 2.0),
                 analysis_key(V[:-1], F[:-1], 3.0)}) == 5
+
+
+def test_lumped_mass_from_a_topology_is_the_same():
+    from bolus_addon.core.saliency import lumped_mass
+
+    V, F = _noisy_cap(0.1)
+    np.testing.assert_array_equal(lumped_mass(V, F, MeshTopology(V, F)), lumped_mass(V, F))
