@@ -47,7 +47,7 @@ settings.register_profile(
 FUZZ = os.environ.get("BOLUS_FUZZ", "") not in ("", "0")
 PROFILE = "bolus-fuzz" if FUZZ else "bolus-ci"
 #: largest triangle count of a drawn surface (before cuts and holes)
-MAX_FACES = 300 if FUZZ else 200
+MAX_FACES = 200
 
 
 def fuzz_settings(ci_examples: int, fuzz_examples: int):
@@ -253,12 +253,13 @@ def preview_params():
 
 def segment_params():
     return st.fixed_dictionaries({"patches": st.integers(1, 8), "eta": _f(0.0, 20.0), "seed": st.integers(0, 1000),
-                                  "smoothing_mm": _f(0.0, 10.0), "method": _rare("KMEANS", "GMM", 6)})
+                                  "smoothing_mm": _f(0.0, 10.0), "method": _rare("KMEANS", "GMM", 25)})
 
 
 def unfold_params():
-    return st.fixed_dictionaries({"max_el": _f(0.0, 10.0), "sheet_thickness_mm": _f(0.0, 10.0),
-                                  "method": _rare("LBFGS", "EXPLICIT", 40), "refine": st.booleans(),
+    return st.fixed_dictionaries({"max_el": st.one_of(st.just(0.0), _f(0.1, 10.0), _f(0.0, 10.0)),
+                                  "sheet_thickness_mm": st.one_of(st.just(0.0), _f(0.0, 10.0)),
+                                  "method": _rare("LBFGS", "EXPLICIT", 100), "refine": st.booleans(),
                                   "gap_mm": _f(0.0, 30.0)})
 
 
@@ -270,7 +271,7 @@ def export_pattern_params():
 
 
 def improve_params():
-    return st.fixed_dictionaries({"max_gap_mm": _f(0.05, 5.0), "method": _rare("GRADIENT", "LPSO", 15),
+    return st.fixed_dictionaries({"max_gap_mm": _f(0.05, 5.0), "method": _rare("GRADIENT", "LPSO", 30),
                                   "seed": st.integers(0, 1000)})
 
 
@@ -296,5 +297,9 @@ def shell_params(draw):
 
 def area_params():
     """radius_mm as a fraction of the surface's size (the test scales it), now and then 0 (refused)."""
-    return st.fixed_dictionaries({"radius_frac": st.one_of(_f(0.05, 1.5), _f(0.05, 1.5), st.just(0.0)),
-                                  "exclude_cavities": st.booleans()})
+    return st.fixed_dictionaries({"radius_frac": st.tuples(st.integers(0, 9), _f(0.05, 1.5)).map(
+                                      lambda t: 0.0 if t[0] == 0 else t[1]),
+                                  "exclude_cavities": st.booleans(),
+                                  # the 3D cursor: near a vertex (index fraction, offset along the size) or anywhere
+                                  "at_vertex": st.one_of(_f(0.0, 1.0), _f(0.0, 1.0), st.none()),
+                                  "offset": st.tuples(*[_f(-0.7, 0.7)] * 3)})
