@@ -30,22 +30,25 @@ __all__ = ["BUDGET_S", "BUDGET_ENV", "COSTS", "budget_s", "estimate_s", "max_tri
 BUDGET_S = 60.0
 BUDGET_ENV = "BOLUS_TIME_BUDGET_S"
 #: step -> (T seconds, at M triangles, growth exponent p): t = T (m / M)^p per piece, fitted to
-#: the core call of each step on nose-tip crops of nefertiti x4 (bench/rangescan_bench.py has the
-#: commands) on the 2-core development machine while other jobs ran (load 7-8: about twice the
-#: time of an idle machine, so the estimates err on the side of refusing):
-#: unfold = `sheet_pieces` with the operator's defaults (Max EL 2 %): 3k 7.7 s, 6k 20 s, 12k 107 s;
-#: improve = `ImproveJob` (GRADIENT, 1 mm): 2k 14.5 s, 5k 24.9 s, 10k 47.6 s;
-#: smooth_cuts = `cutlines.smooth_cuts` (3 patches): 50k 14.9 s, 150k 54.6 s;
-#: print_segment = `print_segmentation` (3 parts): 30k 16.4 s, 120k 20.0 s.
+#: the core call of each step on nose-tip crops of nefertiti x4 on the 2-core development
+#: machine (calibration commands: bench/rangescan_bench.py).  The machine is shared: the same
+#: call took 3-4x longer at load 8 than at load 1, so T is the load-1 fit doubled (unfold,
+#: improve), or measured at load 2.5 (make_shell, x1.3) or load 7-8 (smooth_cuts, print_segment):
+#: unfold = `sheet_pieces` with the operator's defaults (Max EL 2 %): load 1.5: 3k 2.8 s, 6k 5.8 s,
+#:   12k 28.5 s (load 8: 7.7, 20, 107 s);
+#: improve = `ImproveJob` (GRADIENT, 1 mm): load 1: 3k 4.5 s, 6k 6.6 s, 12k 12.7 s (load 8: 2k 14.5 s,
+#:   10k 47.6 s);
+#: smooth_cuts = `cutlines.smooth_cuts` (3 patches), load 8: 50k 14.9 s, 150k 54.6 s;
+#: print_segment = `print_segmentation` (3 parts), load 8: 30k 16.4 s, 120k 20.0 s;
+#: make_shell: per voxel of the wall's band (area x wall / resolution^3, `shell_voxels`), not
+#:   triangles: `shell.make_shell` (10 mm) on the 45 mm nose-tip region (5,580 mm2), load 2.5:
+#:   1 mm (55.8k voxels) 8.9 s, 0.5 mm (446k) 48.6 s.
 COSTS = {
-    "unfold": (67.0, 10_000, 1.9),
-    "improve_flattenability": (47.6, 10_000, 0.74),
+    "unfold": (42.0, 10_000, 1.7),
+    "improve_flattenability": (22.0, 10_000, 0.75),
     "smooth_cuts": (54.6, 150_000, 1.18),
     "print_segment": (20.0, 120_000, 1.0),
-    # per voxel of the wall's band (area x wall / resolution^3, `shell_voxels`), not triangles:
-    # `shell.make_shell` (10 mm) on the 45 mm nose-tip region of nefertiti x4 (5,580 mm2) at load 2.5:
-    # 1 mm (55.8k) 8.9 s, 0.5 mm (446k) 48.6 s
-    "make_shell": (48.6, 446_000, 0.82),
+    "make_shell": (63.0, 446_000, 0.82),
 }
 #: seconds per triangle of the region an operator spends outside the step (read, check, write)
 OVERHEAD_S_PER_TRIANGLE = 2.0e-5
