@@ -58,7 +58,7 @@ def test_refusal_names_the_figures_and_what_to_do(monkeypatch):
                             "select the treatment area first (Select Treatment Area)")
     msg = str(exc.value)
     for part in ("313,417 triangles in 3 islands", "largest piece 125,188 triangles", "Unfold Patches would take",
-                 "over the 60 s budget", "not started", "Select Treatment Area", "Decimate modifier, ratio 0."):
+                 "s left of the 60 s budget after reading", "not started", "Select Treatment Area", "Decimate modifier, ratio 0."):
         assert part in msg, (part, msg)
     # within the budget: the estimate, no refusal
     assert budget.check_budget("unfold", [500], "small", "nothing") < 1.0

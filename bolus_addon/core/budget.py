@@ -122,7 +122,7 @@ def check_budget(step: str, sizes, what: str, advice: str) -> float:
     biggest = int(sizes.max()) if sizes.size else 0
     raise BolusError(
         f"{what} (largest piece {biggest:,} triangles): {name} would take about {_fmt_s(est)} on this computer, "
-        f"over the {limit:.0f} s budget, so it was not started (one piece of up to about "
+        f"over the {_room_text(limit, room)}, so it was not started (one piece of up to about "
         f"{max_triangles(step, room):,} triangles fits in it): {advice}, or decimate the mesh (Decimate modifier, "
         f"ratio {decimate_ratio(step, sizes, room):.2f})")
 
@@ -160,8 +160,16 @@ def check_grid_budget(area_mm2: float, wall_mm: float, resolution: float, min_vo
     else:
         fix = (f"select a smaller region (Select Treatment Area): the resolution that would fit ({coarse:.2f} mm) "
                f"leaves fewer than {min_voxels} voxels across the {wall_mm:g} mm wall")
+    room = max(limit - OVERHEAD_S_PER_TRIANGLE * float(triangles), 0.25 * limit)
     raise BolusError(f"{what} at {resolution:g} mm: Make Bolus would take about {_fmt_s(est)} on this computer, over "
-                     f"the {limit:.0f} s budget, so it was not started: {fix}")
+                     f"the {_room_text(limit, room)}, so it was not started: {fix}")
+
+
+def _room_text(limit: float, room: float) -> str:
+    """"60 s budget", or "50 s left of the 60 s budget after reading the mesh" for a large mesh."""
+    if room >= limit - 0.5:
+        return f"{limit:.0f} s budget"
+    return f"{room:.0f} s left of the {limit:.0f} s budget after reading the mesh"
 
 
 def _fmt_s(seconds: float) -> str:
