@@ -46,8 +46,9 @@ settings.register_profile(
 )
 FUZZ = os.environ.get("BOLUS_FUZZ", "") not in ("", "0")
 PROFILE = "bolus-fuzz" if FUZZ else "bolus-ci"
-#: largest triangle count of a drawn surface (before cuts and holes)
-MAX_FACES = 200
+#: largest triangle count of a drawn surface (before cuts and holes); BOLUS_FUZZ_MAX_FACES=400 for a
+#: `make fuzz` on larger meshes (about twice the time)
+MAX_FACES = int(os.environ.get("BOLUS_FUZZ_MAX_FACES", "200"))
 
 
 def fuzz_settings(ci_examples: int, fuzz_examples: int):

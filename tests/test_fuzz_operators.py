@@ -176,8 +176,10 @@ def assert_unchanged(before, after, attrs=(), props=(), seams=False, what="") ->
     for k in a0:
         if k not in skip:
             np.testing.assert_array_equal(a0[k], a1[k], err_msg=f"{what}: attribute {k} changed")
-    assert {k: v for k, v in p0.items() if k not in props} == {k: v for k, v in p1.items() if k not in props}, \
-        f"{what}: custom properties changed"
+    def plain(p):  # NaN (a "not measured" figure) equals itself here
+        return {k: ("NaN" if isinstance(v, float) and math.isnan(v) else v) for k, v in p.items() if k not in props}
+
+    assert plain(p0) == plain(p1), f"{what}: custom properties changed"
     np.testing.assert_array_equal(M0, M1, err_msg=f"{what}: the source's transform changed")
 
 
@@ -366,8 +368,9 @@ def step_shell(run: Run, p: dict):
         side = attribute(out.data, "bolus_shell_side", "FACE", np.int64)
         assert len(np.unique(side)) >= 2
         assert out["bolus_volume_cm3"] > 0 and math.isfinite(out["bolus_volume_cm3"])
-        for k in ("bolus_thickness_min_mm", "bolus_thickness_max_mm"):  # inf: nothing measured; NaN: a bug
-            assert not math.isnan(out[k]), f"{k} is NaN"
+        th = [out[k] for k in ("bolus_thickness_min_mm", "bolus_thickness_mean_mm", "bolus_thickness_max_mm")]
+        # NaN is the core's "could not be measured" (no ray reached the outer face, with a warning): all or none
+        assert all(math.isnan(x) for x in th) or (all(math.isfinite(x) for x in th) and th[0] <= th[1] <= th[2]), th
     assert_unchanged(before, object_snapshot(run.src), what="make_shell")
     return out
 
@@ -433,6 +436,12 @@ def shell_cases(draw):
 
 
 @fuzzgen.fuzz_settings(5, 60)
+# found by the fuzzing (400 faces): a 1.5 mm Delaunay patch whose wall thickness cannot be measured (no ray
+# reaches the outer face): min / mean / max are NaN together, with a warning (the test's check, not the add-on)
+@example(case=({"kind": "delaunay", "seed": 643, "n": 87, "disc": False, "bumps": 3, "bump_height": 0.38932877409043,
+                "noise": 0.0, "hole": [0.0, 0.05], "size_mm": 1.5, "scale_length": 1.0},
+               {"thickness_mm": 1.1, "clearance_mm": 0.5, "resolution_mm": 0.15, "label": ""}),
+         seg={"method": "ABCUT", "parts": 1, "seed": 0}, orient={"skin_side_up": False, "layer_mm": 0.05})
 @given(case=shell_cases(), seg=fuzzgen.print_segment_params(), orient=fuzzgen.orient_params())
 def test_fuzz_shell(bpy_addon, case, seg, orient):
     """make_shell -> print_segment (solid parts) -> orient_parts -> export_parts on a random surface."""
