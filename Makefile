@@ -83,7 +83,7 @@ test-core: $(VENV)/.installed
 	$(PY) -m pytest tests -m "not blender"
 
 # More than 1,000 random surfaces and parameters through every operator (hypothesis profile "bolus-fuzz";
-# `make test` runs about 50 fixed ones); 30-40 minutes on 2 cores.
+# `make test` runs about 50 fixed ones); about 15 minutes on 2 busy cores (BOLUS_FUZZ_MAX_FACES=400: 20).
 fuzz: $(VENV)/.installed
 	BOLUS_FUZZ=1 $(PY) -m pytest tests/test_fuzz_operators.py tests/test_fuzz_core.py -q --hypothesis-show-statistics
 
