@@ -19,7 +19,7 @@ from .core.colormap import categorical_linear_rgba
 from .core.cutlines import cut_region_check, patch_table, smooth_cuts
 from .core.budget import check_budget
 from .core.errors import BolusError
-from .operators import ATTR_PATCH, ATTR_PATCH_COLOR, PROP_PATCH_TABLE, BolusOperator
+from .operators import ATTR_PATCH, ATTR_PATCH_COLOR, PROP_PATCH_TABLE, BolusOperator, time_limit
 
 #: ours: one row per border (method, turning before/after, shift), read by the panel
 PROP_CUT_TABLE = "bolus_cut_table"
@@ -61,7 +61,8 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
         table = table if isinstance(table, dict) else {}
         smoothing = float(table.get("smoothing_mm", 0.0) or 0.0)
         check_budget("smooth_cuts", [len(region.F)], f"the patches of '{obj.name}' have {len(region.F):,} triangles",
-                     "select the treatment area first (Select Treatment Area) and segment it")
+                     "select the treatment area first (Select Treatment Area) and segment it",
+                     limit=time_limit(context))
         return SimpleNamespace(obj=obj, region=region, labels=labels, warnings=warnings, table=table,
                                smoothing=smoothing)
 

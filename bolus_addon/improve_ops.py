@@ -23,7 +23,7 @@ from .core.budget import check_budget
 from .core.errors import BolusError
 from .core.improve import ImproveJob, improve_messages
 from .core.saliency import DEFAULT_SMOOTHING_MM
-from .operators import ATTR_PATCH, BolusOperator
+from .operators import ATTR_PATCH, BolusOperator, time_limit
 from .pattern_ops import PATTERN_SUFFIX, is_pattern_object
 from .properties import improve_method_property, max_gap_property, seed_property
 
@@ -90,7 +90,8 @@ class _ImproveRun:
         self.patched = labels is not None
         sizes = np.bincount(np.zeros(len(self.region.F), np.int64) if labels is None else labels[labels >= 0])
         check_budget("improve_flattenability", sizes[sizes > 0], f"the region has {len(self.region.F):,} triangles",
-                     "select the treatment area first (Select Treatment Area)")  # issue 14 point 2
+                     "select the treatment area first (Select Treatment Area)",  # issue 14 point 2
+                     limit=time_limit(context))
         self.job = ImproveJob(self.region.V, _world_winding(src, self.region.F), self.max_gap_mm, method=method,
                               rng=self.seed, smoothing_mm=self.smoothing_mm, patch_labels=labels,
                               progress=op.progress, vert_ids=self.region.vert_ids)

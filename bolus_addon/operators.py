@@ -315,6 +315,13 @@ class BolusOperator:
             self.report({"WARNING"}, msg)
 
 
+def time_limit(context) -> float | None:
+    """The user's time limit in seconds (the sidebar's *Time limit (s)*, 0 = none) for core.budget;
+    None (the default budget) when the scene has no Bolus settings."""
+    settings = getattr(getattr(context, "scene", None), "bolus", None)
+    return None if settings is None else float(settings.time_limit_s)
+
+
 def operator_name(op) -> str:
     """'bolus.unfold' (Blender shows a registered operator's bl_idname as 'BOLUS_OT_unfold')."""
     head, sep, tail = op.bl_idname.partition("_OT_")

@@ -242,6 +242,7 @@ def draw_head(layout, g: Guide) -> None:
     mm = mesh_io.mm_per_unit(g.context.scene)
     col = layout.column(align=True)
     col.label(text=f"1 unit = {mm:g} mm; every figure is in mm", icon="DRIVER_DISTANCE")
+    col.prop(g.s, "time_limit_s")
     warn = size_warning(g.obj, mm)
     if warn:
         red = col.column(align=True)

@@ -28,7 +28,7 @@ from .core.pattern_mesh import (add_sheet_figures, build_pattern, collect_pieces
 from .core.piece_advice import DEFAULT_WARN_FRACTION
 from .core.saliency import DEFAULT_SMOOTHING_MM
 from .core.sheet_pieces import iter_sheet_pieces
-from .operators import ATTR_PATCH, BolusOperator
+from .operators import ATTR_PATCH, BolusOperator, time_limit
 from .properties import gap_property, max_el_property, refine_property, sheet_thickness_property, unfold_method_property
 
 ATTR_SOURCE_FACE = "bolus_source_face"
@@ -49,13 +49,13 @@ def check_max_el(max_el_pct: float) -> float:
     return float(max_el_pct) / 100.0
 
 
-def check_unfold_budget(triangles: int, islands) -> None:
+def check_unfold_budget(triangles: int, islands, limit: float | None = None) -> None:
     """BolusError (figures and what to do) when unfolding islands (m,) (-1: left out) would take
-    longer than the time budget (core.budget, issue 14 point 2)."""
+    longer than the time budget (core.budget, issue 14 point 2; limit: the user's time limit)."""
     sizes = np.bincount(islands[islands >= 0])
     check_budget("unfold", sizes, f"the region has {triangles:,} triangles in {len(sizes)} islands (the "
                  "connected pieces of its patches)", "select the treatment area first (Select Treatment Area) and "
-                 "segment it into smaller patches")
+                 "segment it into smaller patches", limit=limit)
 
 
 class _UnfoldJob:
@@ -83,6 +83,7 @@ class _UnfoldJob:
         self.curvatures = None
         self.poly_labels = poly_labels
         self.gap_mm = gap_mm
+        self.time_limit = time_limit(context)
         self.method, self.refine = method.lower(), bool(refine)
         self.corners = mesh_io.polygon_corners(region.mesh)  # for build_pattern
         self.done: list = []
@@ -96,7 +97,7 @@ class _UnfoldJob:
         if self.islands.left_out:  # expected when a region was segmented: said once, as INFO
             self.infos.append(f"{self.islands.left_out} faces outside the segmented patches (bolus_patch = -1) "
                               "were left out of the pattern")
-        check_unfold_budget(len(region.F), self.islands.islands)  # refuse now, not after minutes
+        check_unfold_budget(len(region.F), self.islands.islands, self.time_limit)  # refuse now, not after minutes
         self.V_ref = self._reference(region)
         progress = None if self.progress is None else (lambda f, t="": self.progress(f, t))
         self.iter = iter_sheet_pieces(self.V_ref, region.F, self.islands.islands, max_el=self.max_el,

@@ -30,7 +30,7 @@ from .core.pattern_mesh import pattern_polygons
 from .core.print_measures import CRITICAL_ANGLE_DEG, open_surface_note, overhang_faces
 from .core.print_parts import PrintPlan, orient_print_parts, row_text
 from .core.print_segmentation import print_segmentation
-from .operators import BolusOperator
+from .operators import BolusOperator, time_limit
 from .properties import layer_property, parts_property, print_method_property, seed_property, skin_side_up_property
 
 #: names fixed by SPEC.md
@@ -86,7 +86,7 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
         region, topo, warnings = self.read_region(context, allow_nonmanifold=True)
         check_budget("print_segment", [topo.m], f"the region has {topo.m:,} triangles",
                      "make the bolus on the treatment area first (Select Treatment Area, Make Bolus) and split "
-                     "that")  # refuse now, not after minutes (issue 14)
+                     "that", limit=time_limit(context))  # refuse now, not after minutes (issue 14)
         return SimpleNamespace(solid=False, region=region, topo=topo, warnings=warnings, parts=int(self.parts),
                                method=self.method.lower(), seed=int(self.seed))
 

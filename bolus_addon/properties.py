@@ -243,6 +243,13 @@ def exclude_cavities_property(**kw):
                         "(inside the nostrils, an ear canal): they become holes of the area", default=True, **kw)
 
 
+def time_limit_property(**kw):
+    return FloatProperty(name="Time limit (s)", description="A step estimated (from the mesh size, before it starts) to "
+                         "take longer than this is refused with what to do instead (select a smaller area, decimate, a "
+                         "coarser resolution); 0: no limit, every step runs to the end (Esc cancels it from the sidebar)",
+                         default=60.0, min=0.0, soft_max=600.0, step=1000, precision=0, **kw)
+
+
 class BolusSettings(bpy.types.PropertyGroup):
     area_radius_mm: area_radius_property()
     exclude_cavities: exclude_cavities_property()
@@ -273,3 +280,4 @@ class BolusSettings(bpy.types.PropertyGroup):
     density_g_cm3: density_property()
     connector_clearance_mm: connector_clearance_property()
     left_axis: left_axis_property()
+    time_limit_s: time_limit_property()

@@ -27,7 +27,7 @@ from . import mesh_io
 from .core.errors import BolusError
 from .core.shell import check_shell_request, make_shell
 from .core.solid import closed_report
-from .operators import BolusOperator
+from .operators import BolusOperator, time_limit
 from .print_ops import part_objects
 from .properties import clearance_property, label_property, resolution_property, thickness_property
 
@@ -160,7 +160,8 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
         others = self._rest_of_skin(context, region)
         skin_F = _world_winding(region.obj, region.F)
         label = self.label.strip()
-        return SimpleNamespace(t0=t0, t=t, c=c, res=res, region=region, warnings=warnings, others=others,
+        return SimpleNamespace(t0=t0, t=t, c=c, res=res, time_limit=time_limit(context), region=region,
+                               warnings=warnings, others=others,
                                skin_F=skin_F, label=label, outlines=label_outlines(label) if label else None,
                                left=left_vector(context))
 
@@ -168,6 +169,7 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
     def compute(job, progress):
         """(shell, V, F, side after engraving, the engraving's notes, closed_report of the result)."""
         shell = make_shell(job.region.V, job.skin_F, job.t, job.c, job.res, others=job.others,
+                           time_limit_s=job.time_limit,
                            progress=lambda f, text: progress(0.85 * f, text))
         V, F, side, notes = shell.V, shell.F, np.asarray(shell.side), []
         if job.label:

@@ -102,6 +102,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     g.add_argument("--thickness-mm", type=float, help="shell: bolus thickness in mm")
     g.add_argument("--resolution-mm", type=float, help="shell: voxel resolution in mm (coarser is faster)")
     g.add_argument("--parts", type=int, help="print: number of print parts")
+    g.add_argument("--time-limit-s", type=float, default=60.0,
+                   help="a step estimated to take longer is refused with what to do instead (default 60; 0 = no limit)")
     args = ap.parse_args(argv)
     if not args.stl.is_file():
         ap.error(f"{args.stl}: no such file")
@@ -109,6 +111,8 @@ def parse_args(argv=None) -> argparse.Namespace:
         ap.error(f"{args.stl}: a {'/'.join(FORMATS)} file is needed, got '{args.stl.suffix}'")
     if args.radius <= 0:
         ap.error(f"--radius must be positive, got {args.radius:g}")
+    if not args.time_limit_s >= 0:
+        ap.error(f"--time-limit-s must be 0 (no limit) or positive, got {args.time_limit_s:g}")
     if args.sphere is not None and args.sphere[3] <= 0:
         ap.error(f"--sphere radius must be positive, got {args.sphere[3]:g}")
     try:
@@ -302,6 +306,7 @@ class Run:
         from demo import mm_scene
 
         mm_scene()
+        bpy.context.scene.bolus.time_limit_s = a.time_limit_s
         scale = UNITS_MM[a.units]
         path = str(a.stl.resolve())
         ext = a.stl.suffix.lower()

@@ -160,3 +160,38 @@ def test_make_shell_operator_refuses_over_budget(bpy_addon, scene, monkeypatch):
     refuses_over_budget(bpy, monkeypatch, ob, "make_shell", r"Make Bolus would take about .* not started",
                         thickness_mm=5.0, resolution_mm=1.25)
     assert bpy.data.objects.get("cap_bolus") is not None
+
+
+# --------------------------------------------------------------------------- the user's time limit
+def test_time_limit_argument_and_its_precedence(monkeypatch):
+    monkeypatch.delenv(ENV, raising=False)
+    assert budget.budget_s(None) == budget.BUDGET_S
+    assert budget.budget_s(120.0) == 120.0
+    assert budget.budget_s(0.0) is None and budget.budget_s(float("inf")) is None  # no limit
+    with pytest.raises(BolusError, match="time limit"):
+        budget.budget_s(float("nan"))
+    with pytest.raises(BolusError, match=r"Time limit \(s\) in the Bolus sidebar"):
+        budget.check_budget("unfold", [10 ** 6], "huge", "do less", limit=30.0)
+    assert budget.check_budget("unfold", [10 ** 6], "huge", "do less", limit=0.0) > 60.0  # 0: runs, however long
+    monkeypatch.setenv(ENV, "off")  # the environment wins (tests, batch runs)
+    assert budget.check_budget("unfold", [10 ** 6], "huge", "do less", limit=30.0) > 60.0
+
+
+@pytest.mark.blender
+def test_the_sidebar_time_limit_decides(bpy_addon, scene, monkeypatch):
+    """Scene.bolus.time_limit_s (the sidebar's Time limit (s)): a tiny one refuses Unfold and Make Bolus
+    with the way out named; 0 lets them run."""
+    monkeypatch.delenv(ENV, raising=False)
+    bpy = bpy_addon
+    ob = cap_object(bpy, scene)
+    write_patches(bpy, ob)
+    before = object_snapshot(ob)
+    scene.bolus.time_limit_s = 0.001
+    for op, kw in (("unfold", {"max_el": 0.0}), ("make_shell", {"thickness_mm": 5.0, "resolution_mm": 1.25})):
+        with pytest.raises(RuntimeError, match=r"not started.*Time limit \(s\) in the Bolus sidebar, 0 = no limit"):
+            getattr(bpy.ops.bolus, op)(**kw)
+    assert_same_object(before, object_snapshot(ob))
+    assert bpy.data.objects.get("cap_pattern") is None and bpy.data.objects.get("cap_bolus") is None
+    scene.bolus.time_limit_s = 0.0
+    assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
+    assert bpy.ops.bolus.make_shell(thickness_mm=5.0, resolution_mm=1.25) == {"FINISHED"}

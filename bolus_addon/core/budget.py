@@ -3,15 +3,18 @@
 A step whose work can run for minutes (unfold, improve flattenability, smooth cut lines, split
 into print parts on a whole scan; Make Bolus at a fine resolution) estimates its time from its
 input's size BEFORE the long work and refuses with the figures and what to do (Select Treatment
-Area, a Decimate ratio or a coarser resolution that fits) when the estimate is over the budget.
+Area, a Decimate ratio or a coarser resolution that fits, or a longer time limit) when the
+estimate is over the budget.
 The estimate of a job of pieces m_1..m_k (triangles; for Make Bolus the voxels of the wall's
 band, `shell_voxels`), done one after another, is
 
     t = sum_i  T * (m_i / M) ** p        (seconds)
 
 with (T, M, p) per step in `COSTS`, calibrated on the development machine (2 cores, see
-bench/rangescan_bench.py and docs/benchmarks.md); the budget is `BUDGET_S` seconds, or the
-environment variable ``BOLUS_TIME_BUDGET_S`` (tests lower it; 0 or "off" turns the check off).
+bench/rangescan_bench.py and docs/benchmarks.md); the budget is the caller's ``limit`` (the
+sidebar's *Time limit (s)*, `Scene.bolus.time_limit_s`; 0 = none), else `BUDGET_S` seconds; the
+environment variable ``BOLUS_TIME_BUDGET_S`` overrides both (tests and batch runs; 0 or "off"
+turns the check off).
 `OVERHEAD_S_PER_TRIANGLE` of the region is kept for reading and writing.  bpy-free.
 """
 from __future__ import annotations
@@ -57,11 +60,17 @@ LABELS = {"unfold": "Unfold Patches", "improve_flattenability": "Improve Flatten
           "smooth_cuts": "Smooth Cut Lines", "print_segment": "Split into Print Parts"}
 
 
-def budget_s() -> float | None:
-    """The budget in seconds (`BUDGET_S`, or ``BOLUS_TIME_BUDGET_S``); None when turned off."""
+def budget_s(limit: float | None = None) -> float | None:
+    """The budget in seconds: ``BOLUS_TIME_BUDGET_S`` when set, else ``limit`` (the user's time
+    limit; <= 0 = none), else `BUDGET_S`; None when turned off."""
     raw = os.environ.get(BUDGET_ENV, "").strip()
     if not raw:
-        return BUDGET_S
+        if limit is None:
+            return BUDGET_S
+        limit = float(limit)
+        if np.isnan(limit):
+            raise BolusError("the time limit is not a number of seconds")
+        return limit if 0 < limit < np.inf else None
     if raw.lower() in ("off", "none", "0"):
         return None
     try:
@@ -103,16 +112,17 @@ def decimate_ratio(step: str, sizes, seconds: float) -> float:
     return max(np.floor(r * 100.0) / 100.0, 0.01)
 
 
-def check_budget(step: str, sizes, what: str, advice: str) -> float:
+def check_budget(step: str, sizes, what: str, advice: str, limit: float | None = None) -> float:
     """Refuse (BolusError) when ``step`` on pieces of ``sizes`` triangles would exceed the budget.
 
     The step gets the budget less `OVERHEAD_S_PER_TRIANGLE` per triangle (reading the region,
     checking it, writing the result).  what: the input in words ("the region has 519,844
     triangles in 17 islands"); advice: what to do first ("select the treatment area first"; the
-    Decimate ratio that would fit is added).  Returns the estimate (seconds)."""
+    Decimate ratio that would fit is added); limit: the user's time limit (`budget_s`).
+    Returns the estimate (seconds)."""
     sizes = np.atleast_1d(np.asarray(sizes, dtype=np.int64))
     est = estimate_s(step, sizes)
-    limit = budget_s()
+    limit = budget_s(limit)
     if limit is None:
         return est
     room = max(limit - OVERHEAD_S_PER_TRIANGLE * float(sizes.sum()), 0.25 * limit)
@@ -124,7 +134,7 @@ def check_budget(step: str, sizes, what: str, advice: str) -> float:
         f"{what} (largest piece {biggest:,} triangles): {name} would take about {_fmt_s(est)} on this computer, "
         f"over the {_room_text(limit, room)}, so it was not started (one piece of up to about "
         f"{max_triangles(step, room):,} triangles fits in it): {advice}, or decimate the mesh (Decimate modifier, "
-        f"ratio {decimate_ratio(step, sizes, room):.2f})")
+        f"ratio {decimate_ratio(step, sizes, room):.2f}){_LONGER}")
 
 
 def shell_voxels(area_mm2: float, wall_mm: float, resolution: float) -> float:
@@ -132,11 +142,12 @@ def shell_voxels(area_mm2: float, wall_mm: float, resolution: float) -> float:
     return float(area_mm2) * float(wall_mm) / float(resolution) ** 3
 
 
-def grid_resolution_for_budget(area_mm2: float, wall_mm: float, resolution: float, triangles: int = 0):
+def grid_resolution_for_budget(area_mm2: float, wall_mm: float, resolution: float, triangles: int = 0,
+                               limit: float | None = None):
     """(estimate s, budget s or None, the coarsest resolution (mm, rounded up to 0.01) that fits
     the budget or None when this one fits) of Make Bolus on a region of ``area_mm2``."""
     est = estimate_s("make_shell", shell_voxels(area_mm2, wall_mm, resolution))
-    limit = budget_s()
+    limit = budget_s(limit)
     if limit is None:
         return est, None, None
     room = max(limit - OVERHEAD_S_PER_TRIANGLE * float(triangles), 0.25 * limit)
@@ -148,11 +159,11 @@ def grid_resolution_for_budget(area_mm2: float, wall_mm: float, resolution: floa
 
 
 def check_grid_budget(area_mm2: float, wall_mm: float, resolution: float, min_voxels: int, what: str,
-                      triangles: int = 0) -> float:
+                      triangles: int = 0, limit: float | None = None) -> float:
     """Make Bolus: refuse (BolusError) when a wall of ``wall_mm`` on ``area_mm2`` at ``resolution`` mm
     would take longer than the budget; the advice is the coarsest resolution that fits (while
     the wall keeps ``min_voxels`` across), else a smaller region.  Returns the estimate (s)."""
-    est, limit, coarse = grid_resolution_for_budget(area_mm2, wall_mm, resolution, triangles)
+    est, limit, coarse = grid_resolution_for_budget(area_mm2, wall_mm, resolution, triangles, limit)
     if coarse is None:
         return est
     if coarse <= wall_mm / min_voxels:
@@ -162,7 +173,11 @@ def check_grid_budget(area_mm2: float, wall_mm: float, resolution: float, min_vo
                f"leaves fewer than {min_voxels} voxels across the {wall_mm:g} mm wall")
     room = max(limit - OVERHEAD_S_PER_TRIANGLE * float(triangles), 0.25 * limit)
     raise BolusError(f"{what} at {resolution:g} mm: Make Bolus would take about {_fmt_s(est)} on this computer, over "
-                     f"the {_room_text(limit, room)}, so it was not started: {fix}")
+                     f"the {_room_text(limit, room)}, so it was not started: {fix}{_LONGER}")
+
+
+#: the last way out of every refusal: the user may wait longer
+_LONGER = "; or allow more time (Time limit (s) in the Bolus sidebar, 0 = no limit)"
 
 
 def _room_text(limit: float, room: float) -> str:

@@ -283,14 +283,15 @@ def _fmt(p):
 
 # ---------------------------------------------------------------------------- make_shell
 def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=None, progress=None,
-               _saw_retry=True) -> Shell:
+               time_limit_s=None, _saw_retry=True) -> Shell:
     """A closed bolus solid on the skin region V (n,3) mm, F (m,3) (an open surface whose face
     normals point away from the body; the shell grows on that side).
 
     thickness: outer face at this true distance (mm) from the skin; clearance: inner face at
     this distance (mm, 0 = on the skin); resolution: voxel size (mm) of the level set.
     others: (V2 (k,3), F2 (j,3)) the rest of the skin or None: `BolusError` naming the spot if
-    the shell would run into it.  Every border loop but the outer one (enclosing the most area
+    the shell would run into it.  time_limit_s: the user's time limit (core.budget; None: the
+    default budget, 0: none): a wall estimated to take longer is refused before the work.  Every border loop but the outer one (enclosing the most area
     seen along the region's mean normal) is a hole, kept open through the solid.  Returns a
     `Shell`.
     """
@@ -307,14 +308,14 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     read = len(F) + (0 if others is None else len(others[1]))  # triangles the operator reads and checks
     if grid.points > MAX_GRID_POINTS:  # the resolution advised also fits the time budget (issue 14 point 2)
         coarse = max(res * (grid.points / MAX_GRID_POINTS) ** (1 / 3),
-                     grid_resolution_for_budget(area, t - c, res, read)[2] or 0.0)
+                     grid_resolution_for_budget(area, t - c, res, read, time_limit_s)[2] or 0.0)
         raise BolusError(
             f"the region ({size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm) needs {grid.points / 1e6:.0f} million "
             f"grid points at {res:g} mm, more than the budget of {MAX_GRID_POINTS / 1e6:.0f} million: choose a "
             f"resolution of {coarse:.2g} mm or coarser, or a smaller region")
     check_grid_budget(area, t - c, res, MIN_VOXELS_ACROSS,  # issue 14 point 2: refuse now, not after minutes
                       f"a {t - c:g} mm wall on the region ({size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm, "
-                      f"{area / 100:.0f} cm²)", triangles=read)
+                      f"{area / 100:.0f} cm²)", triangles=read, limit=time_limit_s)
     skin = SkinDistance(V, F)
     check_shell_request(t, c, res, skin.area)
     _check_region(skin)
@@ -403,7 +404,7 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
         F2, ears = drop_border_ears(F)
         if ears:  # a saw-tooth border (whole triangles) left tiny tunnels at the rim: once more without its teeth
             _progress(progress, 0.5, f"again without the border's {ears} saw teeth")
-            again = make_shell(V, F2, t, c, res, others=others, _saw_retry=False,
+            again = make_shell(V, F2, t, c, res, others=others, _saw_retry=False, time_limit_s=time_limit_s,
                                progress=None if progress is None else (lambda f, text: progress(0.5 + 0.5 * f, text)))
             size = float(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).max())
             again.warnings.insert(0, f"the region's border zigzags along whole triangles: its {ears} teeth (triangles "
