@@ -542,13 +542,23 @@ def test_cancelled_run_leaves_nothing_for_undo(bpy_addon, scene):
     bpy.ops.ed.undo_push(message="mesh made")
     before, blocks = object_snapshot(ob), datablocks(bpy)
     Fake = fake_of(bpy, "segment", patches=3)
+    real = Fake.compute
+
+    def gated(job, progress):  # segment takes < 0.2 s on an idle machine: hold it until Esc
+        for _ in range(6000):
+            progress(0.0, "waiting for Esc")  # raises Cancelled once Esc was pressed
+            time.sleep(0.01)
+        return real(job, progress)
+
+    Fake.compute = staticmethod(gated)
     ctx, op = Ctx(bpy), Fake()
     assert op.invoke(ctx, event("LEFTMOUSE")) == {"RUNNING_MODAL"}
     worker = op._worker
     time.sleep(0.2)
-    assert op.modal(ctx, event("TIMER")) == {"RUNNING_MODAL"} or worker.done.is_set()
+    assert op.modal(ctx, event("TIMER")) == {"RUNNING_MODAL"}
     assert op.modal(ctx, event("ESC")) == {"CANCELLED"}
     worker.thread.join(600)
+    assert worker.cancelled and worker.result is None
     bpy.ops.ed.undo_push(message="after the cancelled run")
     after = object_snapshot(bpy.data.objects["skinA"])
     assert bpy.ops.ed.undo() == {"FINISHED"}
