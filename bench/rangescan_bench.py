@@ -71,6 +71,8 @@ SCENARIOS = ("whole", "nose", "nose_decimated")
 #: the Decimate ratio of the nose_decimated scenario (what the refusals advise on the nose area)
 DECIMATE_RATIO = 0.25
 SECTION = "## Range scan: 17 pieces, about 520k faces (`bench/rangescan_bench.py`)"
+#: --head1m: the whole bust (one closed piece, 1.12M faces) through every operator, its own section
+SECTION_HEAD = "## A whole 1.12M-face head through every operator (`bench/rangescan_bench.py --head1m`)"
 PROGRESS_RE = re.compile(r"^bolus\.\w+:.* \d+ %$")
 
 
@@ -248,6 +250,28 @@ def cached_scan(subdivisions: int, target_faces: int) -> tuple[Path, dict]:
     V, F, info = range_scan(subdivisions=subdivisions, target_faces=target_faces)
     np.savez(path, V=V, F=F)
     meta.write_text(json.dumps(info))
+    return path, info
+
+
+def cached_head(subdivisions: int = 2) -> tuple[Path, dict]:
+    """nefertiti.obj subdivided ``subdivisions`` times, whole (closed, one piece: 1.12M faces at 2) as an
+    .npz (V, F) in the scan's cache folder, and its info."""
+    import numpy as np
+
+    from bolus_addon.core.objfile import load_obj
+    from unfold_bench import midpoint_subdivide
+
+    cache = Path(os.environ.get("BOLUS_RANGESCAN_CACHE", Path(tempfile.gettempdir()) / "bolus_rangescan"))
+    cache.mkdir(parents=True, exist_ok=True)
+    path = cache / f"head_d{subdivisions}.npz"
+    if not path.exists():
+        V, F, _ = load_obj(SHARED_MESHES / "nefertiti.obj", 1.0)
+        for _ in range(subdivisions):
+            V, F = midpoint_subdivide(V, F)
+        np.savez(path, V=V, F=F)
+    d = np.load(path)
+    info = {"faces": int(len(d["F"])), "vertices": int(len(d["V"])), "pieces": 1, "piece_faces": [int(len(d["F"]))],
+            "how": f"nefertiti.obj subdivided {subdivisions}x at the edge midpoints, whole (closed)", "seed": None}
     return path, info
 
 
@@ -472,15 +496,15 @@ def tables(results: dict) -> tuple[str, str]:
     return t.text("   "), t.markdown()
 
 
-def replace_section(path: str, text: str) -> None:
+def replace_section(path: str, text: str, section: str = SECTION) -> None:
     """Replace this script's section of the markdown file (from its heading to the next '## '), or append it."""
     out = Path(path)
     old = out.read_text(encoding="utf-8") if out.exists() else ""
-    start = old.find(SECTION)
+    start = old.find(section)
     if start < 0:
         benchutil.append_markdown(path, text)
         return
-    nxt = old.find("\n## ", start + len(SECTION))
+    nxt = old.find("\n## ", start + len(section))
     new = old[:start] + text.strip("\n") + "\n" + (old[nxt:] if nxt >= 0 else "")
     out.write_text(new, encoding="utf-8")
     print(f"section replaced in {out}")
@@ -497,7 +521,13 @@ def main(argv=None) -> int:
     ap.add_argument("--timeout", type=float, default=TIMEOUT_S, help="kill a child after this many seconds")
     ap.add_argument("--verbose", action="store_true", help="show the children's output")
     ap.add_argument("--keep", metavar="DIR", help="write the scan (.npz) and the outputs to DIR")
+    ap.add_argument("--head1m", action="store_true",
+                    help="instead of the scan: the whole bust subdivided to 1.12M faces (one closed piece), "
+                         "scenario whole only (issue 14's 1M-face case)")
     args = ap.parse_args(argv)
+    section = SECTION_HEAD if args.head1m else SECTION
+    if args.head1m:
+        args.scenarios = ["whole"]
     import numpy as np
 
     t_all = time.perf_counter()
@@ -505,7 +535,7 @@ def main(argv=None) -> int:
     tmp.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     sub = 1 if args.quick else 2
-    path, info = cached_scan(sub, TARGET_FACES // (4 if args.quick else 1))
+    path, info = cached_head(sub) if args.head1m else cached_scan(sub, TARGET_FACES // (4 if args.quick else 1))
     info["build_s"] = time.perf_counter() - t0
     print(f"scan: {info['faces']} faces, {info['vertices']} vertices, {info['pieces']} pieces "
           f"(largest {info['piece_faces'][:3]}, smallest {info['piece_faces'][-3:]}); {info['how']}; "
@@ -533,13 +563,17 @@ def main(argv=None) -> int:
     total = time.perf_counter() - t_all
     payload = {"scan": info, "results": results, "target_s": TARGET_S}
     if args.markdown:
-        body = (f"{SECTION}\n\n{benchutil.run_line('rangescan_bench.py', argv)}\n\n"
-                f"The scan: {info['faces']:,} triangles, {info['vertices']:,} vertices, {info['pieces']} "
-                f"edge-connected pieces (faces per piece: {', '.join(map(str, info['piece_faces']))}); "
-                f"{info['how']} (seed {info['seed']}). Each operator of `whole` in a fresh process; `nose` is one "
-                f"process running the chain on the treatment area. Target: each finishes or refuses within "
-                f"{TARGET_S:.0f} s.\n\n{md}\n\n_Whole script: {total:.0f} s._\n")
-        replace_section(args.markdown, body)
+        if args.head1m:
+            what = (f"The mesh: {info['faces']:,} triangles, {info['vertices']:,} vertices, {info['how']}; each "
+                    f"operator in a fresh process, the whole mesh, nothing selected (the scan's `whole` scenario).")
+        else:
+            what = (f"The scan: {info['faces']:,} triangles, {info['vertices']:,} vertices, {info['pieces']} "
+                    f"edge-connected pieces (faces per piece: {', '.join(map(str, info['piece_faces']))}); "
+                    f"{info['how']} (seed {info['seed']}). Each operator of `whole` in a fresh process; `nose` is "
+                    f"one process running the chain on the treatment area.")
+        body = (f"{section}\n\n{benchutil.run_line('rangescan_bench.py', argv)}\n\n{what} Target: each finishes "
+                f"or refuses within {TARGET_S:.0f} s.\n\n{md}\n\n_Whole script: {total:.0f} s._\n")
+        replace_section(args.markdown, body, section)
     print(f"total bench time {total:.1f} s")
     if args.json:
         benchutil.write_json(args.json, {**payload, "total_s": total})
