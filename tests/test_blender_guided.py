@@ -86,6 +86,7 @@ def test_every_operator_has_a_label_and_a_description(bpy_addon):
         assert "Needs " in desc, f"{idname}: the description says what it needs: {desc!r}"
 
 
+@pytest.mark.smoke
 def test_f3_finds_every_operator_in_the_bolus_menu(bpy_addon, scene):
     """F3 (menu search) only finds operators that are in a menu: Object > Bolus and, in Edit
     Mode, Mesh > Bolus list every bolus operator, in the order of the steps."""
@@ -111,6 +112,7 @@ def test_f3_finds_every_operator_in_the_bolus_menu(bpy_addon, scene):
 
 
 # ----------------------------------------------------------------------------- polls with reasons
+@pytest.mark.smoke
 def test_polls_refuse_missing_input_with_a_reason(bpy_addon, scene):
     bpy = bpy_addon
     for idname in bolus_operators(bpy):  # nothing active

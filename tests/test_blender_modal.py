@@ -149,6 +149,7 @@ def tick_until_done(op, ctx, limit_s=600.0):
         time.sleep(0.01)
 
 
+@pytest.mark.smoke
 def test_threaded_run_progress_and_finish(bpy_addon):
     """invoke: prepare, a worker thread, a 0.1 s timer, the progress bar; ticks copy the worker's
     progress to the bar and the header; at the end finish runs in the main thread, all cleared."""
