@@ -337,6 +337,21 @@ def _call(bpy, op: str, **kw):
     return status, dt, msg
 
 
+def _fingerprint(ob) -> str:
+    """sha256 of the source's geometry: coordinates and face corners (issue 14: "the source's data
+    unchanged"; preview and segment add attributes by design, no operator may move or re-wire it)."""
+    import hashlib
+
+    import numpy as np
+
+    me = ob.data
+    co = np.empty(3 * len(me.vertices), dtype=np.float32)
+    me.vertices.foreach_get("co", co)
+    loops = np.empty(len(me.loops), dtype=np.int32)
+    me.loops.foreach_get("vertex_index", loops)
+    return hashlib.sha256(co.tobytes() + loops.tobytes()).hexdigest()
+
+
 def _emit(row: dict) -> None:
     print("RESULT " + json.dumps(row), flush=True)
 
@@ -365,8 +380,11 @@ def worker(scenario: str, op: str, path: str, outdir: str) -> None:
             kw = {"filepath": os.path.join(outdir, "scan_pattern.svg")}
         elif op == "export_parts":
             kw = {"directory": outdir}
+        before = _fingerprint(ob)
         st, dt, msg = _call(bpy, op, **kw)
-        _emit({"op": op, "status": st, "seconds": dt, "message": msg, "setup_s": setup})
+        same = _fingerprint(bpy.data.objects["scan"]) == before
+        _emit({"op": op, "status": st, "seconds": dt, "message": msg, "setup_s": setup,
+               "source": "unchanged" if same else "CHANGED", "unexpected": "Unexpected error" in msg})
         return
     # nose: the treatment area, then the chain on it (nose_decimated: the scan decimated first, as the
     # refusals advise)
@@ -486,12 +504,13 @@ def short(msg: str, n: int = 260) -> str:
 
 def tables(results: dict) -> tuple[str, str]:
     t = Table([("scenario", "<"), ("operator", "<"), ("s", ">"), ("result", "<"), ("within 60 s", "<"),
-               ("progress lines / longest silence s", ">"), ("message (refusals)", "<")])
+               ("source", "<"), ("progress lines / longest silence s", ">"), ("message (refusals)", "<")])
     for scen, rows in results.items():
         for r in rows:
             sil = r.get("silence_s")
             prog = f"{r.get('progress_lines', 0)} / {sil:.1f}" if sil is not None else "n/a"
-            t.add(scen, r["op"], f"{r['seconds']:.1f}", r["status"], verdict(r), prog,
+            status = r["status"] + (" (UNEXPECTED ERROR)" if r.get("unexpected") else "")
+            t.add(scen, r["op"], f"{r['seconds']:.1f}", status, verdict(r), r.get("source", "-"), prog,
                   short(r.get("message", "")) if r["status"] != "finished" else "")
     return t.text("   "), t.markdown()
 
