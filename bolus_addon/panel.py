@@ -21,7 +21,7 @@ from .improve_ops import IMPROVED_SUFFIX, PROP_IMPROVE_TABLE
 from .operators import PROP_FLV, PROP_PATCH_TABLE, PROP_SUM_VARPI
 from .pattern_ops import PATTERN_SUFFIX, PROP_PATTERN_TABLE
 from .print_ops import ATTR_PRINT_PART, PROP_ORIENT_TABLE, PROP_PART_SOURCE, PROP_PRINT_TABLE, part_objects
-from .shell_ops import (BOLUS_SUFFIX, PROP_MASS, PROP_THICKNESS_MAX, PROP_THICKNESS_MEAN, PROP_THICKNESS_MIN,
+from .shell_ops import (PROP_MASS, PROP_THICKNESS_MAX, PROP_THICKNESS_MEAN, PROP_THICKNESS_MIN,
                         PROP_VOLUME, is_bolus_object)
 from .solid_print_ops import PROP_CONNECTORS
 
@@ -374,18 +374,6 @@ def draw_sheet(layout, g: Guide) -> None:
         op.file_format = fmt
 
 
-def bolus_of(obj):
-    """The bolus solid to show figures of: obj itself, its ``<name>_bolus``, or the bolus a part came from."""
-    if obj is None:
-        return None
-    if is_bolus_object(obj):
-        return obj
-    src = bpy.data.objects.get(obj.get(PROP_PART_SOURCE, ""))
-    if is_bolus_object(src):
-        return src
-    return bpy.data.objects.get(obj.name + BOLUS_SUFFIX)
-
-
 def draw_print(layout, g: Guide) -> None:
     """6b: Make Bolus and its figures, then (the bolus selected) split, orient, export the parts."""
     box = g.step(layout, "print")
@@ -400,7 +388,7 @@ def draw_print(layout, g: Guide) -> None:
     row.prop(s, "left_axis", text="Left")
     row.prop(s, "density_g_cm3", text="g/cm³")
     g.button(col, "bolus.make_shell", icon="MOD_SOLIDIFY")
-    b = bolus_of(obj)
+    b = guide.bolus_for(obj)
     if b is not None and PROP_VOLUME in b:
         box.label(text=f"{b.name}: {b[PROP_VOLUME]:.1f} cm³, {b.get(PROP_MASS, 0.0):.0f} g")
         box.label(text=f"Wall {b.get(PROP_THICKNESS_MIN, 0.0):.2f} / {b.get(PROP_THICKNESS_MEAN, 0.0):.2f} / "
