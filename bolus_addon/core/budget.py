@@ -125,7 +125,7 @@ def check_budget(step: str, sizes, what: str, advice: str, limit: float | None =
     limit = budget_s(limit)
     if limit is None:
         return est
-    room = max(limit - OVERHEAD_S_PER_TRIANGLE * float(sizes.sum()), 0.25 * limit)
+    room = _room(limit, float(sizes.sum()))
     if est <= room:
         return est
     name = LABELS.get(step, step)
@@ -150,7 +150,7 @@ def grid_resolution_for_budget(area_mm2: float, wall_mm: float, resolution: floa
     limit = budget_s(limit)
     if limit is None:
         return est, None, None
-    room = max(limit - OVERHEAD_S_PER_TRIANGLE * float(triangles), 0.25 * limit)
+    room = _room(limit, triangles)
     if est <= room:
         return est, limit, None
     _, _, p = _cost("make_shell")
@@ -171,13 +171,18 @@ def check_grid_budget(area_mm2: float, wall_mm: float, resolution: float, min_vo
     else:
         fix = (f"select a smaller region (Select Treatment Area): the resolution that would fit ({coarse:.2f} mm) "
                f"leaves fewer than {min_voxels} voxels across the {wall_mm:g} mm wall")
-    room = max(limit - OVERHEAD_S_PER_TRIANGLE * float(triangles), 0.25 * limit)
+    room = _room(limit, triangles)
     raise BolusError(f"{what} at {resolution:g} mm: Make Bolus would take about {_fmt_s(est)} on this computer, over "
                      f"the {_room_text(limit, room)}, so it was not started: {fix}{_LONGER}")
 
 
 #: the last way out of every refusal: the user may wait longer
 _LONGER = "; or allow more time (Time limit (s) in the Bolus sidebar, 0 = no limit)"
+
+
+def _room(limit: float, triangles: float) -> float:
+    """Seconds left for the step: the budget less `OVERHEAD_S_PER_TRIANGLE` per triangle read, at least a quarter."""
+    return max(limit - OVERHEAD_S_PER_TRIANGLE * float(triangles), 0.25 * limit)
 
 
 def _room_text(limit: float, room: float) -> str:
