@@ -18,6 +18,17 @@ def grid(nx: int = 10, ny: int = 10, size: float = 100.0, jitter: float = 0.0, r
     return V, F
 
 
+def bump_quads(n: int = 16, size: float = 100.0):
+    """An (n x n)-quad grid of `size` with a Gaussian bump 0.2 size high in the middle: V ((n+1)^2, 3), F (n^2, 4)."""
+    xs = np.linspace(0.0, size, n + 1)
+    X, Y = np.meshgrid(xs, xs, indexing="ij")
+    Z = 0.2 * size * np.exp(-((X - size / 2) ** 2 + (Y - size / 2) ** 2) / (0.06 * size * size))
+    V = np.c_[X.ravel(), Y.ravel(), Z.ravel()]
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    F = np.stack([idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()], axis=1)
+    return V, F
+
+
 def height_field(fn, nx=20, ny=20, size=100.0):
     """Grid with z = fn(x, y), centred on the origin."""
     V, F = grid(nx, ny, size)

@@ -22,6 +22,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from conftest import assert_same_object, make_object, object_snapshot
+from meshgen import bump_quads
 from test_blender_shell import hemisphere
 
 pytestmark = pytest.mark.blender
@@ -310,12 +311,7 @@ def fake_of(bpy, name, **props):
 
 def bump(bpy, name, n=14, size=100.0):
     """A (n x n)-quad grid of `size` mm with a bump, 1 unit = 1 mm, active."""
-    xs = np.linspace(0.0, size, n + 1)
-    X, Y = np.meshgrid(xs, xs, indexing="ij")
-    Z = 0.2 * size * np.exp(-((X - size / 2) ** 2 + (Y - size / 2) ** 2) / (0.06 * size * size))
-    V = np.c_[X.ravel(), Y.ravel(), Z.ravel()]
-    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
-    F = np.stack([idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()], axis=1)
+    V, F = bump_quads(n, size)
     return make_object(bpy, V, F, name=name, scale_length=0.001)
 
 

@@ -27,6 +27,7 @@ from conftest import (
     make_object,
     mesh_snapshot,
 )
+from meshgen import bump_quads
 
 pytestmark = pytest.mark.blender
 
@@ -557,12 +558,7 @@ def test_undo_after_segment_restores_mesh(bpy_addon, scene):
 # ------------------------------------------- every operator, every mode, both entries (issue 9)
 def bump_grid(bpy, n=16, size=100.0):
     """A (n x n)-quad grid of `size` mm with a bump, 1 unit = 1 mm; returns (object, quad centres)."""
-    xs = np.linspace(0.0, size, n + 1)
-    X, Y = np.meshgrid(xs, xs, indexing="ij")
-    Z = 0.2 * size * np.exp(-((X - size / 2) ** 2 + (Y - size / 2) ** 2) / (0.06 * size * size))
-    V = np.c_[X.ravel(), Y.ravel(), Z.ravel()]
-    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
-    F = np.stack([idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()], axis=1)
+    V, F = bump_quads(n, size)
     ob = make_object(bpy, V, F, scale_length=0.001)
     return ob, V[F].mean(axis=1)
 
