@@ -167,7 +167,8 @@ def test_save_load_round_trip(tmp_path):
     assert back.sizes == (90, 10, 6, 4) and back.meta == sae.meta
     assert np.array_equal(back.encode(X), sae.encode(X))
     with np.load(path, allow_pickle=False) as z:
-        assert sorted(z.files) == sorted([f"{n}_{k}" for k in range(3) for n in ("W1", "b1", "W2", "b2")] + ["meta"])
+        assert sorted(z.files) == sorted([f"{n}_{k}" for k in range(3) for n in ("W1", "b1", "W2", "b2", "lo", "span")]
+                                         + ["meta"])
         assert all(z[n].dtype == np.float64 for n in z.files if n != "meta")
     # a path without the .npz suffix is written as given
     other = tmp_path / "model.sae"
@@ -247,14 +248,23 @@ def test_bad_settings_are_refused():
     assert isinstance(unpack(pack(init_autoencoder(3, 2, 0)), 3, 2), AutoEncoder)
 
 
-def test_code_std_shows_the_collapse_the_docstring_warns_of():
-    """The module docstring's caution: with the seed's decay on every layer, layers 2 and 3 collapse
-    to constant codes (code_std ~ 0, the same pf for every row); a smaller decay after layer 1 keeps them."""
+def test_input_scaling_keeps_layers_2_and_3_from_collapsing():
+    """The module docstring's 'input scaling': without it, the seed's decay on every layer collapses layers
+    2 and 3 to constant codes (code_std ~ 0, the same pf for every row); with it (the default) every layer
+    keeps lam = 0.004 and varies, and encode() applies the stored scaling."""
     X = feature_rows(300, seed=4)
-    seed_lam, infos = train_stacked(X, max_iter=150, rng=0)
+    plain, infos = train_stacked(X, max_iter=150, rng=0, scale_inputs=False)
     assert infos[0]["code_std"] > 0.02
     assert infos[1]["code_std"] < 1e-3 and infos[2]["code_std"] < 1e-3
-    assert seed_lam.encode(X).std(axis=0).mean() < 1e-3
-    kept, infos = train_stacked(X, lam=(0.004, 0.001, 0.001), max_iter=150, rng=0)
-    assert all(i["code_std"] > 0.01 for i in infos) and kept.meta["lam"] == [0.004, 0.001, 0.001]
+    assert plain.encode(X).std(axis=0).mean() < 1e-3 and plain.scales == []
+    kept, infos = train_stacked(X, max_iter=150, rng=0)
+    assert all(i["code_std"] > 0.01 for i in infos) and kept.meta["lam"] == [0.004] * 3
     assert kept.encode(X).std(axis=0).mean() > 0.01
+    # every layer's training input spans [0, 1] column by column (constant columns stay constant)
+    for inp in kept.layer_inputs(X):
+        span = inp.max(axis=0) - inp.min(axis=0)
+        assert inp.min() >= -1e-12 and inp.max() <= 1 + 1e-12
+        assert np.all((np.abs(span - 1.0) < 1e-9) | (span < 1e-12))
+    # a per-layer decay is still accepted
+    per_layer, _ = train_stacked(X, lam=(0.004, 0.001, 0.001), max_iter=5, rng=0)
+    assert per_layer.meta["lam"] == [0.004, 0.001, 0.001]

@@ -24,10 +24,13 @@ Where the seed is vague, the choices made here:
 * weights start uniform in +-sqrt(6/(d+h+1)), biases at zero; minimised by L-BFGS-B with the exact
   analytic gradient (the seed used MATLAB; its iteration counts 1319, 413, 237 are not copied).
 
-Caution, measured: with the seed's lam = 0.004 in this form (no 1/2 on D, 1/(2N) on the error) the
-codes of the sparse layer 1 vary too little for layers 2 and 3 to pay their weight decay; they collapse
-to W = 0, constant codes (`info["code_std"]` ~ 0) and pf is the same for every row.  A smaller decay
-for those layers (`lam=(0.004, 0.001, 0.001)`, the same as MATLAB's MSE + lam/2 sum W^2) keeps them.
+* input scaling (``train_stacked(scale_inputs=True)``, the default): every layer's input columns are
+  rescaled to [0, 1] over the training rows, (x - lo) / span, and lo, span are stored with the weights
+  and applied by `StackedAutoEncoder.encode`.  This is what MATLAB's trainAutoencoder (the seed's tool)
+  does by default ('ScaleData').  Measured without it: the codes of the sparse layer 1 (mean 0.05,
+  spread 0.07) vary too little for layers 2 and 3 to pay the seed's weight decay lam = 0.004; they
+  collapse to W = 0, constant codes (`info["code_std"]` ~ 0), and pf is the same for every row.  With
+  the scaling every layer keeps lam = 0.004 and its codes vary.  (``lam`` may also be given per layer.)
 
 Every array is float64.  Bad input raises `BolusError`; randomness comes from `rng`.
 """
@@ -270,6 +273,9 @@ class StackedAutoEncoder:
 
     layers: list[AutoEncoder]
     meta: dict = field(default_factory=dict)
+    #: per layer (lo (d_k,), span (d_k,)): its input is rescaled to (x - lo) / span first (module doc,
+    #: "input scaling"); empty: no rescaling (files written before the scaling)
+    scales: list = field(default_factory=list)
 
     @property
     def sizes(self) -> tuple[int, ...]:
@@ -282,10 +288,22 @@ class StackedAutoEncoder:
         """The hidden features pf (eq. 3-14): X (N,d) through every encoder -> (N, last size)."""
         if not self.layers:
             raise BolusError("the stacked auto-encoder has no layers")
+        return self.layer_inputs(X, codes=True)[-1]
+
+    def layer_inputs(self, X, codes: bool = False) -> list[np.ndarray]:
+        """The (rescaled) input of every layer for X (N,d): a list of (N, d_k); with ``codes`` the
+        last layer's codes appended (the hidden features pf)."""
+        if not self.layers:
+            raise BolusError("the stacked auto-encoder has no layers")
         H = _check_rows(X, self.layers[0].n_in, "stacked auto-encoder", unit=True, min_rows=1)
-        for ae in self.layers:
+        out = []
+        for k, ae in enumerate(self.layers):
+            if self.scales:
+                lo, span = self.scales[k]
+                H = (H - lo) / span
+            out.append(H)
             H = sigmoid(H @ ae.W1.T + ae.b1)
-        return H
+        return out + [H] if codes else out
 
     def save(self, path) -> None:
         """Write a .npz: W1_k, b1_k, W2_k, b2_k (float64) for every layer k and `meta` as a JSON string."""
@@ -293,6 +311,8 @@ class StackedAutoEncoder:
         for k, ae in enumerate(self.layers):
             for name in ("W1", "b1", "W2", "b2"):
                 arrays[f"{name}_{k}"] = np.asarray(getattr(ae, name), dtype=np.float64)
+            if self.scales:
+                arrays[f"lo_{k}"], arrays[f"span_{k}"] = (np.asarray(a, dtype=np.float64) for a in self.scales[k])
         try:
             meta = json.dumps(self.meta, sort_keys=True)
         except (TypeError, ValueError) as exc:
@@ -324,7 +344,7 @@ class StackedAutoEncoder:
             raise BolusError(f"{bad}: the meta data is not JSON ({exc})") from None
         if not isinstance(meta, dict):
             raise BolusError(f"{bad}: the meta data is not a dictionary")
-        layers = []
+        layers, scales = [], []
         d = None
         k = 0
         while f"W1_{k}" in data:
@@ -346,20 +366,29 @@ class StackedAutoEncoder:
             if h < 1 or dk < 1:
                 raise BolusError(f"{bad}: layer {k} is empty")
             layers.append(AutoEncoder(*(np.asarray(a, dtype=np.float64) for a in (W1, b1, W2, b2))))
+            if f"lo_{k}" in data or f"span_{k}" in data:
+                lo, span = data.get(f"lo_{k}"), data.get(f"span_{k}")
+                if lo is None or span is None or lo.shape != (dk,) or span.shape != (dk,) \
+                        or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(span)) and np.all(span > 0)):
+                    raise BolusError(f"{bad}: layer {k}'s input scaling is incomplete or not {dk} finite "
+                                     "numbers with positive spans")
+                scales.append((np.asarray(lo, dtype=np.float64), np.asarray(span, dtype=np.float64)))
             d = h
             k += 1
         if not layers:
             raise BolusError(f"{bad}: it holds no layers")
-        known = {"meta"} | {f"{n}_{i}" for i in range(k) for n in ("W1", "b1", "W2", "b2")}
+        if scales and len(scales) != len(layers):
+            raise BolusError(f"{bad}: {len(scales)} of its {len(layers)} layers have an input scaling")
+        known = {"meta"} | {f"{n}_{i}" for i in range(k) for n in ("W1", "b1", "W2", "b2", "lo", "span")}
         extra = [n for n in data if n not in known]
         if extra:
             raise BolusError(f"{bad}: unexpected arrays {sorted(extra)}")
-        return cls(layers, meta)
+        return cls(layers, meta, scales)
 
 
 def train_stacked(X, sizes: Sequence[int] = (120, 50, 20), lam: float | Sequence[float] = 0.004, rho: float = 0.05,
                   beta: float = 5.0, max_iter: int | Sequence[int] = (400, 400, 400), rng=0,
-                  progress: Callable[[float, str], None] | None = None):
+                  progress: Callable[[float, str], None] | None = None, scale_inputs: bool = True):
     """Greedy layer-wise training of a stack (Algorithm 6-1) on X (N,d), rows in [0,1].
 
     Layer 1 (sizes[0] hidden units) minimises the sparse C_1s (eq. 3-20, line 2); every further
@@ -389,9 +418,15 @@ def train_stacked(X, sizes: Sequence[int] = (120, 50, 20), lam: float | Sequence
     dims = (X.shape[1],) + sizes
     weights = np.array([dims[k] * dims[k + 1] * iters[k] for k in range(len(sizes))], dtype=np.float64)
     starts = np.concatenate([[0.0], np.cumsum(weights)]) / weights.sum()
-    layers, infos = [], []
+    layers, infos, scales = [], [], []
     H = X
     for k, h in enumerate(sizes):
+        if scale_inputs:  # module doc, "input scaling": every input column spans [0, 1] on the training rows
+            lo = H.min(axis=0)
+            span = H.max(axis=0) - lo
+            span = np.where(span > 1e-12, span, 1.0)
+            scales.append((lo, span))
+            H = (H - lo) / span
         def report(frac, text, k=k):
             if progress is not None:
                 progress(float(starts[k] + frac * (starts[k + 1] - starts[k])),
@@ -406,7 +441,7 @@ def train_stacked(X, sizes: Sequence[int] = (120, 50, 20), lam: float | Sequence
         progress(1.0, "stacked auto-encoder trained")
     meta = {
         "sizes": list(dims), "lam": [float(v) for v in lams], "rho": float(rho), "beta": float(beta),
-        "sparse_layers": [1],
+        "sparse_layers": [1], "scale_inputs": bool(scale_inputs),
         "max_iter": [int(i) for i in iters], "rng": rng if isinstance(rng, int) else None,
         "iterations": [i["iterations"] for i in infos], "cost_end": [i["cost_end"] for i in infos],
         "seconds": [round(i["seconds"], 3) for i in infos], "code_std": [i["code_std"] for i in infos],
@@ -415,4 +450,4 @@ def train_stacked(X, sizes: Sequence[int] = (120, 50, 20), lam: float | Sequence
         "versions": {"numpy": np.__version__, "scipy": scipy.__version__, "format": 1},
         "seed": "eqs. 3-15..3-21, Algorithm 6-1",
     }
-    return StackedAutoEncoder(layers, meta), infos
+    return StackedAutoEncoder(layers, meta, scales), infos

@@ -81,7 +81,7 @@ __all__ = [
     "area_balance",
 ]
 
-METHODS = ("abcut", "ratiocut")
+METHODS = ("abcut", "ratiocut", "learned")  #: "learned": learned_segmentation.py (seed 6.4)
 ALIKE_DEG, APART_DEG = 30.0, 60.0  #: q' = 1 under 30 deg between normals, 0.5 under 60, else 0 (seed's 3 levels)
 CONCAVE_PER_MM = 0.02  #: u': a face is concave with a radius of curvature under 50 mm (eq. 6-19's eps)
 MIN_PART_FRACTION = 0.05  #: parts under 5 % of the area are merged: a smaller part is not worth a print
@@ -194,7 +194,9 @@ def print_segmentation(
 ) -> PrintSegmentation:
     """Split the mesh V (n,3) mm, F (m,3) into about ``parts`` edge-connected print parts.
 
-    method "abcut" (area-balanced, eqs. 6-26..6-36) or "ratiocut" (unnormalised L).
+    method "abcut" (area-balanced, eqs. 6-26..6-36) or "ratiocut" (unnormalised L); "learned"
+    hands over to `learned_segmentation.learned_segmentation` (seed 6.4: the number of parts comes
+    from the data, ``parts`` is not used; returns a `LearnedSegmentation`).
     Parts below ``min_part_fraction`` of the area are merged into a neighbour, so the
     result can have fewer parts than asked (or more, when a cluster falls apart into
     large pieces).  ``face_groups`` (m,) int, optional: the polygon of each triangle;
@@ -203,6 +205,11 @@ def print_segmentation(
     """
     report = progress or (lambda f, t: None)
     k = _check_request(parts, method, min_part_fraction)
+    if method == "learned":  # the number of parts comes from the data: ``parts`` is not used
+        from .learned_segmentation import learned_segmentation  # noqa: PLC0415 (it imports this module)
+
+        return learned_segmentation(V, F, rng=rng, topo=topo, min_part_fraction=min_part_fraction,
+                                    face_groups=face_groups, progress=progress)
     topo = MeshTopology(*check_mesh(V, F, nondegenerate=False, min_faces=0)) if topo is None else topo
     if topo.m == 0:
         raise BolusError("the mesh has no faces; select the faces to split")
@@ -239,7 +246,7 @@ def print_segmentation(
 def _check_request(parts, method: str, min_part_fraction: float) -> int:
     """The number of parts asked, after checking it, the method and the crumb fraction."""
     if method not in METHODS:
-        raise BolusError(f"unknown print segmentation method {method!r}; use 'abcut' or 'ratiocut'")
+        raise BolusError(f"unknown print segmentation method {method!r}; use 'abcut', 'ratiocut' or 'learned'")
     try:
         k = int(parts)
     except (TypeError, ValueError):
