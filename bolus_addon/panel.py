@@ -402,13 +402,16 @@ def draw_print(layout, g: Guide) -> None:
     col = g.gate(box, guide.needs_bolus_selected(g.context))
     col.prop(s, "connector_clearance_mm", text="Connector clearance (mm)")
     row = col.row(align=True)
-    row.prop(s, "parts")
+    sub = row.row(align=True)
+    sub.active = s.print_method != "LEARNED"  # the learned split finds the number itself
+    sub.prop(s, "parts")
     row.prop(s, "print_method", text="")
     g.button(col, "bolus.print_segment", icon="MOD_EXPLODE")
     src = print_source(obj)
     t = mesh_io.json_prop(src, PROP_PRINT_TABLE)
     if t and "parts" in t:
-        box.label(text=f"{len(t['parts'])} parts, largest/smallest area {t['area_balance']:.2f}")
+        found = f" (learned: {t['ap_clusters']} clusters)" if t.get("ap_clusters") else ""
+        box.label(text=f"{len(t['parts'])} parts{found}, largest/smallest area {t['area_balance']:.2f}")
     row = col.row(align=True)
     row.prop(s, "layer_mm", text="Layer (mm)")
     row.prop(s, "skin_side_up")

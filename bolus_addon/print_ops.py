@@ -68,7 +68,7 @@ def _remove_parts(source_name: str) -> None:
 
 
 class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
-    """Split the bolus into parts of balanced area for 3D printing (area-balanced spectral cut, seed 6.2). Needs the bolus made by Make Bolus, selected (a skin surface splits into open pieces); makes the face attribute bolus_print_part and, on a solid, flat joints with pegs and holes"""
+    """Split the bolus into parts for 3D printing: of balanced area (area-balanced spectral cut, seed 6.2), or with Cut 'Learned' as many as the printing features call for (auto-encoder + affinity propagation, seed 6.4). Needs the bolus made by Make Bolus, selected (a skin surface splits into open pieces); makes the face attribute bolus_print_part and, on a solid, flat joints with pegs and holes"""
 
     bl_idname = "bolus.print_segment"
     bl_label = "Split into Print Parts"
@@ -118,6 +118,8 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
         obj[PROP_PRINT_TABLE] = json.dumps({**table, "method": self.method})
         note = open_surface_note(topo)
         self.warn_all(warnings + [m for m in [seg.count_note()] if m])
+        if hasattr(seg, "summary"):  # the learned split: what the data gave
+            self.report({"INFO"}, f"Learned split: {seg.summary()}")
         self.report({"INFO"}, f"Split '{obj.name}' into {seg.part_count} print parts ({self.method}; largest/smallest "
                               f"area {table['area_balance']:.2f}); attribute '{ATTR_PRINT_PART}'"
                               + (f"; {note}" if note else ""))

@@ -156,6 +156,8 @@ def warn_distortion_property(**kw):
 PRINT_METHODS = [
     ("ABCUT", "ABcut", "Area-balanced spectral cut (seed 6.2): parts of similar area (default)"),
     ("RATIOCUT", "RatioCut", "Plain spectral cut, the seed's 'traditional method' (for comparison)"),
+    ("LEARNED", "Learned", "Stacked auto-encoder + affinity propagation (seed 6.4): the number of parts comes from "
+                           "the surface's printing features, Parts is not used (a second opinion)"),
 ]
 
 

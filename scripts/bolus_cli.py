@@ -17,7 +17,7 @@ mm in the file's frame) and runs the --steps in this order:
   export   bolus.export_pattern (--page, --label, --seam-allowance-mm): pattern.svg, pattern.dxf,
            pattern_<page>.pdf (pattern.pdf with --page NONE)    (needs unfold: added)
   shell    bolus.make_shell (--thickness-mm, --resolution-mm, --label): <name>_bolus
-  print    bolus.print_segment (--parts, --seed), bolus.orient_parts, bolus.export_parts on the
+  print    bolus.print_segment (--parts, --seed, --print-method), bolus.orient_parts, bolus.export_parts on the
            bolus: parts/*.stl (binary, mm, closed)              (needs shell: added)
 
 and writes report.json, result.blend and, with --png, surface.png (the skin alone, seen along
@@ -102,6 +102,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     g.add_argument("--thickness-mm", type=float, help="shell: bolus thickness in mm")
     g.add_argument("--resolution-mm", type=float, help="shell: voxel resolution in mm (coarser is faster)")
     g.add_argument("--parts", type=int, help="print: number of print parts")
+    g.add_argument("--print-method", choices=("ABCUT", "RATIOCUT", "LEARNED"),
+                   help="print: how to split (LEARNED finds the number of parts itself)")
     g.add_argument("--time-limit-s", type=float, default=60.0,
                    help="a step estimated to take longer is refused with what to do instead (default 60; 0 = no limit)")
     args = ap.parse_args(argv)
@@ -422,7 +424,7 @@ class Run:
 
         a = self.args
         self.activate(self.bolus, region=False)
-        self.op("print", bpy.ops.bolus.print_segment, parts=a.parts, seed=a.seed)
+        self.op("print", bpy.ops.bolus.print_segment, parts=a.parts, seed=a.seed, method=a.print_method)
         self.op("print", bpy.ops.bolus.orient_parts)
         parts_dir = self.out / "parts"
         parts_dir.mkdir(exist_ok=True)

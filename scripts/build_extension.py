@@ -157,6 +157,11 @@ a.data.foreach_get("value", lab)
 out["patch_labels"] = sorted(set(lab.tolist()))
 
 out["unfold"] = sorted(bpy.ops.bolus.unfold())
+bpy.context.view_layer.objects.active = ob
+try:  # the learned print split needs the shipped auto-encoder weights (assets/print_sae.npz in the zip)
+    out["learned"] = sorted(bpy.ops.bolus.print_segment(method="LEARNED"))
+except RuntimeError as exc:
+    out["learned"] = [str(exc)]
 pat = bpy.data.objects.get("sheet_pattern")
 out["pattern"] = pat is not None
 if pat is not None:
@@ -238,6 +243,8 @@ def installed_run_problems(res: dict, user: Path) -> list[str]:
         bad.append(f"operators not from the installed copy: {res['module_file']}")
     if res["segment"] != ["FINISHED"] or res["patch_labels"] != [0, 1]:
         bad.append(f"segment: {res['segment']}, bolus_patch values {res['patch_labels']}")
+    if res.get("learned") != ["FINISHED"]:
+        bad.append(f"print_segment(method='LEARNED') (the shipped auto-encoder): {res.get('learned')}")
     if res.get("export") != {"svg": 1, "dxf": 1, "pdf": 1}:
         bad.append(f"pattern export (SVG, DXF, PDF): {res.get('export')}")
     if res["unfold"] != ["FINISHED"] or not res["pattern"]:

@@ -60,9 +60,11 @@ def test_zip_holds_the_addon_and_no_dev_files(built_zip):
     # every module of the package is there (4.2's `paths` would have dropped folder contents)
     for py in (ROOT / "bolus_addon").rglob("*.py"):
         assert py.relative_to(ROOT).as_posix() in names
-    for banned in ("tests/", "bench/", "scripts/", "assets/", ".ci/", "docs/", "dist/", "build/", ".venv", "Makefile",
+    for banned in ("tests/", "bench/", "scripts/", ".ci/", "docs/", "dist/", "build/", ".venv", "Makefile",
                    "requirements", "pyproject.toml", "__pycache__"):
         assert not any(n.startswith(banned) or f"/{banned}" in n for n in names), f"{banned} leaked into the zip"
+    # of assets/ only the learned print split's trained auto-encoder ships (the meshes are for demo and tests)
+    assert sorted(n for n in names if n.startswith("assets/")) == ["assets/print_sae.npz"], names
 
 
 def test_manifest_keeps_every_generated_folder_out_of_the_zip():
