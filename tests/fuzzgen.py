@@ -277,7 +277,7 @@ def improve_params():
 
 
 def print_segment_params():
-    return st.fixed_dictionaries({"parts": st.integers(1, 8), "method": st.sampled_from(["ABCUT", "RATIOCUT"]),
+    return st.fixed_dictionaries({"parts": st.integers(1, 8), "method": st.sampled_from(["ABCUT", "RATIOCUT", "LEARNED"]),
                                   "seed": st.integers(0, 1000)})
 
 

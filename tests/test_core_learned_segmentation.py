@@ -184,3 +184,11 @@ def test_shipped_auto_encoder_has_the_seeds_shape():
     X = np.random.default_rng(0).uniform(size=(5, 90))
     H = sae.encode(X)
     assert H.shape == (5, 20) and np.isfinite(H).all()
+
+
+def test_equal_similarities_make_one_cluster():
+    lab, ex, it = affinity_propagation(np.array([[2.0, 0.7], [0.7, 2.0]]))
+    assert lab.tolist() == [0, 0] and len(ex) == 1 and it == 0
+    V, F = grid(5, 5, 50.0)  # 50 triangles: two sub-graphs at most
+    seg = learned_segmentation(V, F)
+    assert seg.subgraphs.count <= 2 and seg.part_count >= 1

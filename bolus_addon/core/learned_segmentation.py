@@ -136,6 +136,8 @@ def affinity_propagation(S, rng=0, damping: float = DAMPING, max_iter: int = MAX
     if N == 1:
         return np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), 0
     off = S[~np.eye(N, dtype=bool)]
+    if np.ptp(off) <= 1e-12 * max(1.0, float(np.abs(off).max())):  # e.g. two sub-graphs: nothing to tell apart
+        return np.zeros(N, dtype=np.int64), np.zeros(1, dtype=np.int64), 0
     pref = {"median": np.median, "min": np.min}[preference](off) if isinstance(preference, str) else preference
     seed = int(as_rng(rng).integers(2**31 - 1))
     ap = AffinityPropagation(affinity="precomputed", damping=damping, max_iter=int(max_iter),
@@ -233,9 +235,12 @@ class LearnedSegmentation(PrintSegmentation):
     def summary(self) -> str:
         """One line for the user: clusters, parts, sub-graphs, usage rate."""
         sg = self.subgraphs
-        return (f"affinity propagation found {self.ap_clusters} clusters of {sg.count:,} sub-graphs of "
+        text = (f"affinity propagation found {self.ap_clusters} clusters of {sg.count:,} sub-graphs of "
                 f"{sg.size} triangles (triangle usage rate {100 * sg.usage_rate:.1f} %), {self.part_count} "
                 f"connected parts")
+        if self.part_count == 1:
+            text += "; nothing in its printing features calls for a split (ABcut splits into as many as asked)"
+        return text
 
     def table(self, V, F, topo: MeshTopology | None = None) -> dict:
         t = super().table(V, F, topo)
