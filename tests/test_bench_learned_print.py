@@ -65,7 +65,7 @@ def test_markdown_section_and_tables(lpb, run):
         assert len({line.count("|") for line in lines}) == 1
     rows = lpb.summary_table(data["meshes"]).rows
     assert [r[1] for r in rows] == ["whole model", "LEARNED", "GEOMETRIC", "ABCUT"]
-    assert rows[3][3] == f"{data['meshes'][0]['methods'][2]['parts']} ({data['meshes'][0]['methods'][0]['parts']})"
+    assert rows[3][4] == f"{data['meshes'][0]['methods'][2]['parts']} ({data['meshes'][0]['methods'][0]['parts']})"
 
 
 def test_training_lines_flag_a_bench_mesh_in_the_training_set(lpb, run):
@@ -75,3 +75,18 @@ def test_training_lines_flag_a_bench_mesh_in_the_training_set(lpb, run):
     shipped["meshes"] = shipped["meshes"] + ["fish.obj"]
     assert lpb.training_lines({"shipped": shipped, "run": None}, ["fish.obj"])[1] == \
         "NOTE: fish.obj IS in the training set."
+
+
+def test_cluster_coherence_measures_scattered_clusters(lpb):
+    """1 when every cluster is one edge-connected piece; the area share of the largest pieces otherwise."""
+    import meshgen
+
+    from bolus_addon.core.topology import MeshTopology
+
+    V, F = meshgen.grid(4, 1, 40.0)  # 8 triangles in a strip, 10 mm squares
+    t = MeshTopology(V, F)
+    x = t.centroids[:, 0]
+    one_piece = (x > 20).astype(int)
+    assert lpb.cluster_coherence(t, one_piece) == 1.0
+    scattered = ((x > 10) & (x < 30)).astype(int)  # cluster 0 in two pieces of equal area at the ends
+    assert abs(lpb.cluster_coherence(t, scattered) - 0.75) < 1e-12
