@@ -31,7 +31,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 from badmesh import CASES, NAN_VERTEX, NM_EDGE, vid
-from conftest import attr_array
+from conftest import assert_labels_connected, attr_array
 
 pytestmark = pytest.mark.blender
 
@@ -566,3 +566,44 @@ def test_tally(tmp_path_factory, capfd):
     with capfd.disabled():
         print(f"\ncorpus tally: {summary}; table in {path}")
     assert unexp == 0
+
+
+#: print_segment(method='LEARNED') where it must refuse (else it finishes); the rest as the ABcut run
+LEARNED_EXPECT = {
+    "zero_area": ZERO_AREA.format(n0=_n, n1=_n + 1),
+    "nan": NAN,
+    "one_triangle": r"the region has 1 triangles and no 15 of them connected: too small for the learned split "
+                    r"\(sub-graphs of 30 triangles\); use ABcut",
+}
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_learned_split_on_corpus_case(bpy_addon, scene, tmp_path, name, capfd):
+    """The learned print split (issue 15) on every bad mesh: valid parts, or a refusal naming the problem;
+    the source changed only where the split writes, undone in one step, the user's mode kept."""
+    bpy = bpy_addon
+    case = CASES[name](bpy)
+    ob = case.obj
+    src = ob.name
+    _activate(bpy, ob)
+    before = snap(ob)
+    bpy.ops.ed.undo_push(message="before the learned split")
+    status, msg = run_op(bpy, "print_segment", {"method": "LEARNED"})
+    ob = bpy.data.objects[src]
+    assert ob.mode == case.mode
+    exp = LEARNED_EXPECT.get(name)
+    if exp is None:
+        assert status == F, f"{name}: {status} {msg}"
+    else:
+        assert status == "REFUSED" and re.search(exp, msg), f"{name}: {status} {msg!r} does not match {exp!r}"
+    after = snap(ob)
+    changed = diff(before, after, **(WRITES["print_segment"] if status == F else {}))
+    assert not changed, changed
+    if status == F:
+        problems = check_undo(bpy, "print_segment", src, before, after, case.mode)
+        assert not problems, problems
+        ob = bpy.data.objects[src]
+        with object_mode(bpy, ob):
+            check_valid(bpy, "print_segment", ob, tmp_path, {})
+            lab = attr_array(ob.data, "bolus_print_part", np.int64)
+            assert_labels_connected(ob.data, np.where(lab >= 0, lab, -1), "print part")

@@ -71,6 +71,7 @@ def test_learned_split_of_a_skin_surface_twice_and_undo(bpy_addon, scene, capfd)
         np.testing.assert_array_equal(attr_array(ob.data, "bolus_print_part", np.int64), lab)
 
 
+@pytest.mark.smoke
 def test_learned_split_of_an_edit_mode_region(bpy_addon, scene, capfd):
     bpy = bpy_addon
     ob = face(bpy)
