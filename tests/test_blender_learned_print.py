@@ -50,6 +50,8 @@ def test_learned_split_of_a_skin_surface_twice_and_undo(bpy_addon, scene, capfd)
     assert lab.min() == 0 and set(np.unique(lab)) == set(range(parts))
     assert_labels_connected(me, lab, "print part")
     assert f"into {parts} print parts (LEARNED;" in out, out
+    many = f"Warning: the learned split made {parts} parts (from {clusters} clusters): every joint is a seam"
+    assert (many in out) == (parts > 6), out
     co, loops, seams_, _ = mesh_snapshot(me)
     np.testing.assert_array_equal(co, before[0])
     np.testing.assert_array_equal(loops, before[1])

@@ -73,6 +73,7 @@ MAX_ITER = 10_000  #: Algorithm 6-2's T
 CONVERGENCE_ITER = 15  #: Algorithm 6-2's IT: exemplars unchanged for this many iterations
 MAX_EXEMPLAR_SET = 1_500  #: sub-graphs affinity propagation runs on at most (module doc, "scale")
 SIMILARITIES = ("learned", "geometric")
+MANY_PARTS = 6  #: more learned parts than this are warned about (`LearnedSegmentation.count_note`)
 SAE_FILE = "print_sae.npz"
 
 _sae_cache: dict = {}
@@ -229,8 +230,13 @@ class LearnedSegmentation(PrintSegmentation):
     seconds: dict = field(default_factory=dict)  #: time per step
 
     def count_note(self) -> str | None:
-        """Nothing to warn about: the learned method has no asked count to miss."""
-        return None
+        """A warning when the data called for many parts (more than `MANY_PARTS`): every joint of a
+        printed bolus is a seam that must close exactly on the skin; None otherwise."""
+        p = self.part_count
+        if p <= MANY_PARTS:
+            return None
+        return (f"the learned split made {p} parts (from {self.ap_clusters} clusters): every joint is a seam that "
+                f"must meet exactly on the skin; check them on the planning CT, or split with ABcut into fewer parts")
 
     def summary(self) -> str:
         """One line for the user: clusters, parts, sub-graphs, usage rate."""
