@@ -28,7 +28,7 @@ from .core.colormap import categorical_linear_rgba
 from .core.engrave import strings_needed
 from .core.errors import BolusError
 from .core.print_segmentation import print_segmentation
-from .core.solid import SIDE_INNER, closed_report
+from .core.solid import SIDE_INNER, closed_report, weld_short_edges
 from .core.topology import MeshTopology
 from .shell_ops import (
     ATTR_SHELL_SIDE,
@@ -159,6 +159,11 @@ def finish_solid(op, context, job, result) -> set[str]:
         pside, plabels = np.asarray(pside), np.asarray(plabels)
         warnings = warnings + list(notes)
         closed = [closed_report(*_part_arrays(PV, PF, plabels == p)) for p in range(int(plabels.max()) + 1)]
+    # slivers whose shortest edge float32 cannot hold would collapse in Blender's mesh and in the STL
+    PV, PF, keep = weld_short_edges(PV, PF)
+    pside, plabels = pside[keep], plabels[keep]
+    if not keep.all():
+        closed = [closed_report(*_part_arrays(PV, PF, plabels == p)) for p in range(len(closed))]
     k = len(closed)
     op.progress(0.95, "writing the parts")
     with mesh_io.object_mode(obj):
@@ -252,7 +257,8 @@ def closed_lines(region, tri_labels) -> tuple[list[str], list[str]]:
 
 
 def part_closed_report(context, part) -> dict:
-    """closed_report of a part object's evaluated mesh (world mm)."""
+    """closed_report of a part object's evaluated mesh (world mm) as a slicer reads its STL: vertices
+    with equal float32 coordinates are one vertex (a triangle collapsed by that is not closed)."""
     ev = part.evaluated_get(context.evaluated_depsgraph_get())
     me = ev.to_mesh()
     try:
@@ -261,7 +267,9 @@ def part_closed_report(context, part) -> dict:
         F = mesh_io.get_array(me.loop_triangles, "vertices", len(me.loop_triangles), np.int64, 3)
     finally:
         ev.to_mesh_clear()
-    return closed_report(mesh_io.world_mm(co, part, mesh_io.mm_per_unit(context.scene)), F)
+    W = mesh_io.world_mm(co, part, mesh_io.mm_per_unit(context.scene))
+    _, first, inv = np.unique(W.astype(np.float32), axis=0, return_index=True, return_inverse=True)
+    return closed_report(W[first], inv.reshape(-1)[F])
 
 
 def is_solid_part(part) -> bool:

@@ -83,3 +83,28 @@ def test_ray_thickness_bad_input():
         ray_thickness(V, F, [[1.0, 1, 1], [2.0, 2, 2]], [[0.0, 0, 1]], 10.0)
     with pytest.raises(BolusError, match="not finite"):
         ray_thickness(V, F, [[np.nan, 1, 1]], [[0.0, 0, 1]], 10.0)
+
+
+def test_weld_short_edges_collapses_float32_slivers_and_keeps_the_solid_closed():
+    from meshgen import icosphere
+
+    from bolus_addon.core.solid import closed_report, weld_short_edges
+
+    V, F = icosphere(3, 30.0)
+    V = V.copy()
+    a, b = F[0, 0], F[0, 1]
+    V[b] = V[a] + 2e-6 * (V[b] - V[a]) / np.linalg.norm(V[b] - V[a])  # a 2e-6 mm edge: one point in float32
+    assert closed_report(V, F)["closed"]
+    V2, F2, keep = weld_short_edges(V, F)
+    assert len(F2) == len(F) - 2 and keep.sum() == len(F2) and not keep[0]
+    assert len(V2) == len(V) - 1
+    r = closed_report(V2, F2)
+    assert r["closed"] and r["genus"] == 0
+    assert abs(r["volume_mm3"] - closed_report(V, F)["volume_mm3"]) < 1e-6 * abs(r["volume_mm3"])
+    # float32 coordinates no longer collapse any triangle
+    P = V2.astype(np.float32)[F2]
+    assert not (np.all(P[:, 0] == P[:, 1], axis=1) | np.all(P[:, 1] == P[:, 2], axis=1)
+                | np.all(P[:, 0] == P[:, 2], axis=1)).any()
+    # nothing short: unchanged
+    V3, F3, keep3 = weld_short_edges(*icosphere(2, 30.0))
+    assert keep3.all() and len(F3) == len(icosphere(2, 30.0)[1])

@@ -25,8 +25,12 @@ from .errors import BolusError
 
 __all__ = [
     "SIDE_INNER", "SIDE_OUTER", "SIDE_RIM", "SIDE_CUT", "SIDE_CONNECTOR", "SIDE_NAMES",
-    "to_manifold", "from_manifold", "closed_report", "ray_thickness",
+    "to_manifold", "from_manifold", "closed_report", "ray_thickness", "WELD_MM", "weld_short_edges",
 ]
+
+#: edges shorter than this (mm) are collapsed before a solid is written (`weld_short_edges`): far below
+#: any printer's resolution, far above float32 rounding of mm coordinates (~1e-5 mm at 100 mm)
+WELD_MM = 1e-3
 
 SIDE_INNER, SIDE_OUTER, SIDE_RIM, SIDE_CUT, SIDE_CONNECTOR = 0, 1, 2, 3, 4
 SIDE_NAMES = {SIDE_INNER: "inner", SIDE_OUTER: "outer", SIDE_RIM: "rim", SIDE_CUT: "cut", SIDE_CONNECTOR: "connector"}
@@ -173,3 +177,45 @@ def ray_thickness(V, F, origins, directions, max_mm, *, manifold=None, min_mm: f
     if return_points:
         return out, pts
     return out
+
+
+def weld_short_edges(V, F, tol: float = WELD_MM) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Collapse the edges shorter than ``tol`` of a closed solid V (n,3) mm, F (m,3).
+
+    The booleans leave a few sliver triangles whose shortest edge is a few 1e-6 mm: written as
+    float32 (Blender's mesh, an STL file) its two ends become one point and a slicer that merges
+    equal coordinates sees collapsed triangles.  Every connected group of short edges is merged
+    into its lowest vertex (placed at the group's mean), triangles left with fewer than three
+    distinct corners are dropped and unused vertices removed.  When the result is not closed
+    (`closed_report`; a collapse that would pinch the surface) the input is returned unchanged.
+    Returns (V' (n',3), F' (m',3), keep (m,) bool: the input triangles kept, in order).
+    """
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
+    keep_all = np.ones(len(F), dtype=bool)
+    if len(F) == 0:
+        return V, F, keep_all
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    short = np.einsum("ij,ij->i", V[E[:, 0]] - V[E[:, 1]], V[E[:, 0]] - V[E[:, 1]]) < tol * tol
+    if not short.any():
+        return V, F, keep_all
+    n = len(V)
+    S = E[short]
+    _, lab = connected_components(coo_matrix((np.ones(len(S)), (S[:, 0], S[:, 1])), shape=(n, n)), directed=False)
+    rep = np.full(lab.max() + 1, n, dtype=np.int64)
+    np.minimum.at(rep, lab, np.arange(n))
+    to = rep[lab]
+    W = V.copy()
+    grouped = np.bincount(to, minlength=n) > 1
+    if grouped.any():
+        sums = np.zeros((n, 3))
+        np.add.at(sums, to, V)
+        W[grouped] = sums[grouped] / np.bincount(to, minlength=n)[grouped][:, None]
+    G = to[F]
+    keep = (G[:, 0] != G[:, 1]) & (G[:, 1] != G[:, 2]) & (G[:, 0] != G[:, 2])
+    used, inv = np.unique(G[keep], return_inverse=True)
+    V2, F2 = W[used], inv.reshape(-1, 3)
+    if not closed_report(V2, F2)["closed"]:
+        return V, F, keep_all
+    return V2, F2, keep
+
