@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 from meshgen import box, grid, icosphere, torus
 
+from test_core_print_segmentation import _assert_parts_edge_connected
+
 from bolus_addon.core.errors import BolusError
 from bolus_addon.core.learned_segmentation import (
     affinity_propagation,
@@ -22,14 +24,6 @@ def _two_shapes():
     V2, F2 = torus(50.0, 18.0, 40, 16)
     V2 = V2 + np.array([400.0, 0.0, 0.0])
     return np.r_[V1, V2], np.r_[F1, F2 + len(V1)], len(F1)
-
-
-def _assert_parts_connected(topo, labels):
-    p = labels.max() + 1
-    assert set(np.unique(labels)) == set(range(p))
-    _, comp = topo.face_components(labels)
-    for q in range(p):
-        assert len(np.unique(comp[labels == q])) == 1, f"part {q} falls apart"
 
 
 def test_subgraphs_are_connected_in_search_order_and_use_most_triangles():
@@ -129,7 +123,7 @@ def test_two_separated_shapes_give_clusters_that_never_mix_or_split_a_subgraph()
     for c in np.unique(seg.clusters):
         on = np.nonzero(seg.clusters == c)[0]
         assert (on < m1).all() or (on >= m1).all()
-    _assert_parts_connected(t, seg.labels)
+    _assert_parts_edge_connected(t, seg.labels)
     assert seg.hidden.shape == (sg.count, 20)
     tab = seg.table(V, F)
     assert tab["requested"] is None and tab["ap_clusters"] == seg.ap_clusters and tab["subgraphs"] == sg.count
@@ -147,14 +141,14 @@ def test_fixed_seed_gives_the_same_parts_twice_and_dispatch_matches():
     assert (note is None) == (c.part_count <= 6)
     if note:
         assert note.startswith(f"the learned split made {c.part_count} parts (from {c.ap_clusters} clusters)")
-    _assert_parts_connected(MeshTopology(V, F), a.labels)
+    _assert_parts_edge_connected(MeshTopology(V, F), a.labels)
 
 
 def test_geometric_similarity_is_the_seeds_comparison():
     V, F = icosphere(4, 60.0)
     seg = learned_segmentation(V, F, similarity_kind="geometric")
     assert seg.hidden is None and seg.ap_clusters >= 1
-    _assert_parts_connected(MeshTopology(V, F), seg.labels)
+    _assert_parts_edge_connected(MeshTopology(V, F), seg.labels)
 
 
 def test_large_sets_cluster_a_spread_sample_then_join_exemplars():
@@ -167,7 +161,7 @@ def test_large_sets_cluster_a_spread_sample_then_join_exemplars():
     for row in part.subgraphs.faces:
         got = row[row >= 0]
         assert len(np.unique(part.labels[got])) == 1
-    _assert_parts_connected(t, part.labels)
+    _assert_parts_edge_connected(t, part.labels)
 
 
 def test_refusals():
