@@ -89,14 +89,16 @@ fuzz: $(VENV)/.installed
 
 # docs/benchmarks.md is written fresh (a header with the date, machine and versions), then every
 # script appends its tables; each runs even when an earlier one failed, the target fails if any did.
-# `make bench BENCH_ARGS=--quick` passes options to all of them (unfold_bench, shell_bench and learned_print_bench also take --only NAME).
-# The full run takes about 50 minutes on 2 cores (the unfold benchmark 12 of them, the shell one about 11,
-# the range scan and the 1M head about 10, the learned print segmentation with its training about 2).
+# `make bench BENCH_ARGS=--quick` passes options to all of them (unfold_bench, shell_bench, learned_print_bench and
+# retrieval_bench also take --only NAME).
+# The full run takes about 75 minutes on 2 cores (the retrieval from Workbench renders about 25 of them, the unfold
+# benchmark 12, the shell one about 11, the range scan and the 1M head about 10, the learned print segmentation
+# with its training about 2).
 BENCH_MD ?= docs/benchmarks.md
 BENCH_ARGS ?=
 bench: $(VENV)/.installed
 	$(PY) bench/benchutil.py --header $(BENCH_MD)
-	@rc=0; for b in segment_bench unfold_bench cuts_bench print_bench learned_print_bench shell_bench flatten_bench scale_bench rangescan_bench; do \
+	@rc=0; for b in segment_bench unfold_bench cuts_bench print_bench learned_print_bench retrieval_bench shell_bench flatten_bench scale_bench rangescan_bench; do \
 	  echo "== bench/$$b.py"; $(PY) bench/$$b.py --markdown $(BENCH_MD) $(BENCH_ARGS) || rc=1; \
 	done; \
 	echo "== bench/rangescan_bench.py --head1m"; $(PY) bench/rangescan_bench.py --head1m --markdown $(BENCH_MD) $(BENCH_ARGS) || rc=1; \
