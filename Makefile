@@ -91,8 +91,8 @@ fuzz: $(VENV)/.installed
 # script appends its tables; each runs even when an earlier one failed, the target fails if any did.
 # `make bench BENCH_ARGS=--quick` passes options to all of them (unfold_bench, shell_bench, learned_print_bench and
 # retrieval_bench also take --only NAME).
-# The full run takes about 75 minutes on 2 cores (the retrieval from Workbench renders about 25 of them, the unfold
-# benchmark 12, the shell one about 11, the range scan and the 1M head about 10, the learned print segmentation
+# The full run takes about 60 minutes on 2 cores (the unfold benchmark 12 of them, the shell one and the retrieval
+# from Workbench renders about 11 each, the range scan and the 1M head about 10, the learned print segmentation
 # with its training about 2).
 BENCH_MD ?= docs/benchmarks.md
 BENCH_ARGS ?=
