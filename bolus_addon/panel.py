@@ -23,6 +23,7 @@ from .pattern_ops import PATTERN_SUFFIX, PROP_PATTERN_TABLE
 from .print_ops import ATTR_PRINT_PART, PROP_ORIENT_TABLE, PROP_PART_SOURCE, PROP_PRINT_TABLE, part_objects
 from .shell_ops import (PROP_MASS, PROP_THICKNESS_MAX, PROP_THICKNESS_MEAN, PROP_THICKNESS_MIN,
                         PROP_VOLUME, is_bolus_object)
+from .retrieval_ops import PROP_LIBRARY, PROP_RETRIEVAL
 from .solid_print_ops import PROP_CONNECTORS
 
 #: the line every user reads (README "Intended use")
@@ -44,6 +45,8 @@ OP_SETTINGS = {
     "bolus.print_segment": {"parts": "parts", "method": "print_method", "seed": "seed"},
     "bolus.orient_parts": {"layer_mm": "layer_mm", "skin_side_up": "skin_side_up"},
     "bolus.export_parts": {},
+    "bolus.build_library": {"directory": "library_dir"},
+    "bolus.retrieve": {"filepath": "photo_path", "directory": "library_dir", "count": "retrieve_count"},
 }
 
 #: (number, title, icon, hint: what it does and what it needs) of every step, in order
@@ -57,12 +60,15 @@ STEPS = {
     "sheet": ("6a", "Sheet pattern", "UV", "Flat pattern at true size, then export (needs: the skin, "
                                           "best with patches)"),
     "print": ("6b", "Printed bolus", "MOD_SOLIDIFY", "Solid, print parts, orient, export STL (needs: the skin)"),
+    "library": ("7", "Bolus library", "ASSET_MANAGER", "A stored bolus like a photo, to start from (needs: a folder "
+                                                     "of .blend / .stl / .obj models, a photo)"),
 }
 #: the step each operator belongs to
 STEP_OF = {"bolus.select_area": "area", "bolus.saliency_preview": "preview", "bolus.segment": "segment",
            "bolus.smooth_cuts": "cuts", "bolus.improve_flattenability": "improve", "bolus.unfold": "sheet",
            "bolus.export_pattern": "sheet", "bolus.make_shell": "print", "bolus.print_segment": "print",
-           "bolus.orient_parts": "print", "bolus.export_parts": "print"}
+           "bolus.orient_parts": "print", "bolus.export_parts": "print", "bolus.build_library": "library",
+           "bolus.retrieve": "library"}
 
 
 def set_settings(op, idname: str, s) -> None:
@@ -427,6 +433,24 @@ def draw_print(layout, g: Guide) -> None:
     g.button(col, "bolus.export_parts", icon="EXPORT")
 
 
+def draw_library(layout, g: Guide) -> None:
+    """7: the library folder and the photo, Build and Find, the best matches of the last search."""
+    box = g.step(layout, "library")
+    col = box.column(align=True)
+    col.prop(g.s, "library_dir", text="Library")
+    lib = mesh_io.json_prop(g.context.scene, PROP_LIBRARY)
+    if lib:
+        col.label(text=f"{lib['models']} models cached", icon="CHECKMARK")
+    g.button(col, "bolus.build_library", icon="FILE_REFRESH")
+    col.prop(g.s, "photo_path", text="Photo")
+    col.prop(g.s, "retrieve_count")
+    g.button(col, "bolus.retrieve", icon="VIEWZOOM")
+    found = mesh_io.json_prop(g.context.scene, PROP_RETRIEVAL)
+    if found:
+        draw_table(box, ("#", "Model", "Dissimilarity"),
+                   ((str(k), r["model"], f"{r['score']:.4g}") for k, r in enumerate(found, 1)))
+
+
 def print_source(obj):
     """The object whose print tables to show: obj, or the source a print part names (a bolus and an
     improved surface name their skin in 'bolus_source' too, but their parts are their own)."""
@@ -447,7 +471,8 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
         layout = self.layout
         g = Guide(context)
         draw_head(layout, g)
-        for draw in (draw_area, draw_preview, draw_segment, draw_cuts, draw_improve, draw_sheet, draw_print):
+        for draw in (draw_area, draw_preview, draw_segment, draw_cuts, draw_improve, draw_sheet, draw_print,
+                     draw_library):
             draw(layout, g)
 
 

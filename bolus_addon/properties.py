@@ -283,3 +283,9 @@ class BolusSettings(bpy.types.PropertyGroup):
     connector_clearance_mm: connector_clearance_property()
     left_axis: left_axis_property()
     time_limit_s: time_limit_property()
+    library_dir: StringProperty(name="Library", subtype="DIR_PATH", default="",
+                                description="Folder of bolus models (.blend, .stl, .obj) to find a match in")
+    photo_path: StringProperty(name="Photo", subtype="FILE_PATH", default="",
+                               description="Photo of the treatment site or of a bolus (PNG, JPEG, ...)")
+    retrieve_count: IntProperty(name="Matches", description="How many of the best matches to list", default=5,
+                                min=1, soft_max=20)
