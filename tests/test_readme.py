@@ -98,11 +98,19 @@ def test_sidebar_names_are_the_panels(text):
     assert named and not named - ui - BLENDER_UI, sorted(named - ui - BLENDER_UI)
 
 
-def test_what_is_not_there_yet_is_not_there(text):
-    para = text[text.index("**Not there yet:**"):]
-    para = para[:para.index("\n\n")]
-    planned = set(re.findall(r"`(\w+)`", para))
-    assert planned and not planned & registered_operators(), "implemented now: move it out of 'Not there yet'"
+def test_every_spec_operator_is_registered_and_what_is_not_there_yet_is_not_there(text):
+    """Every operator of SPEC's table is registered; a "Not there yet" paragraph (if any) names no
+    registered operator."""
+    spec = ROOT.parent / "shared" / "SPEC.md"
+    if not spec.exists():
+        pytest.skip(f"{spec} not available (../shared is expected beside the repository)")
+    in_spec = set(re.findall(r"^\| `(\w+)\(", spec.read_text(encoding="utf-8"), flags=re.M))
+    assert in_spec and in_spec <= registered_operators(), sorted(in_spec - registered_operators())
+    if "**Not there yet:**" in text:
+        para = text[text.index("**Not there yet:**"):]
+        para = para[:para.index("\n\n")]
+        planned = set(re.findall(r"`(\w+)`", para))
+        assert planned and not planned & registered_operators(), "implemented now: move it out of 'Not there yet'"
 
 
 def test_table_arguments_are_the_operators_properties(text):
