@@ -41,6 +41,7 @@ def library(bpy, folder):
     bpy.data.meshes.remove(me)
 
 
+@pytest.mark.smoke
 def test_build_library_caches_and_redoes_what_changed(bpy_addon, scene, tmp_path, capfd, monkeypatch):
     bpy = bpy_addon
     library(bpy, tmp_path)
@@ -109,6 +110,7 @@ def test_retrieve_imports_the_best_match_and_lists_the_best(bpy_addon, scene, tm
     assert {o.name for o in bpy.data.objects} == names
 
 
+@pytest.mark.smoke
 def test_bad_photo_and_library_are_refused(bpy_addon, scene, tmp_path, capfd):
     bpy = bpy_addon
     lib = tmp_path / "lib"
