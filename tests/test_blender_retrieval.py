@@ -12,15 +12,10 @@ from blender_render import render_object
 from meshgen import icosphere, torus
 from test_blender_panel import draw_panel
 from test_blender_shell import reports
+from test_core_retrieval import write_obj
 from test_core_stlfile import write_binary
 
 pytestmark = pytest.mark.blender
-
-
-def write_obj(path, V, F):
-    with open(path, "w") as fh:
-        fh.writelines(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in V)
-        fh.writelines("f " + " ".join(str(i + 1) for i in f) + "\n" for f in F)
 
 
 def ellipsoid():
