@@ -80,35 +80,8 @@ def read_blend_model(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def read_models(todo: list[Path]) -> list[tuple[Path, object]]:
     """(file, arrays or the file itself) for the models to describe: .blend files are read here (main
-    thread, Blender), .obj / .stl later in the worker (core readers)."""
+    thread, Blender), .obj / .stl later in the worker (core.retrieval.describe_models)."""
     return [(p, read_blend_model(p) if p.suffix.lower() == ".blend" else p) for p in todo]
-
-
-def describe_models(items, progress, start: float, span: float) -> tuple[list, list[str]]:
-    """(LibraryEntry list, warnings) for ``items`` of `read_models` (worker thread)."""
-    entries, warnings = [], []
-    for k, (path, data) in enumerate(items):
-        progress(start + span * k / max(len(items), 1), f"model {k + 1}/{len(items)}: {path.name}")
-        try:
-            V, F = retrieval.read_model(path) if isinstance(data, Path) else data
-            desc = retrieval.model_descriptor(V, F)
-        except BolusError as exc:  # one bad model does not stop the library
-            warnings.append(f"{path.name} left out of the library: {exc}")
-            continue
-        size, sha1 = retrieval.fingerprint(path)
-        entries.append(retrieval.LibraryEntry(path.name, size, sha1, desc,
-                                              {"vertices": int(len(V)), "triangles": int(len(F))}))
-    return entries, warnings
-
-
-def update_library(folder: str, items, keep, progress, start: float, span: float):
-    """Describe ``items``, save the cache with ``keep`` (worker thread) -> (entries by name, new, warnings)."""
-    new, warnings = describe_models(items, progress, start, span)
-    entries = sorted(keep + new, key=lambda e: e.file)
-    if not entries:
-        raise BolusError(f"no model of the library {folder} could be described: " + "; ".join(warnings))
-    retrieval.save_cache(folder, entries, retrieval.SETTINGS)
-    return {e.file: e for e in entries}, new, warnings
 
 
 def read_photo(path: str) -> np.ndarray:
@@ -184,7 +157,7 @@ class BOLUS_OT_build_library(BolusOperator, bpy.types.Operator):
 
     @staticmethod
     def compute(job, progress):
-        return update_library(job.folder, job.items, job.keep, progress, 0.0, 1.0)
+        return retrieval.update_library(job.folder, job.items, job.keep, progress, 0.0, 1.0)
 
     def finish(self, context, job, result):
         entries, new, warnings = result
@@ -223,14 +196,7 @@ class BOLUS_OT_retrieve(BolusOperator, bpy.types.Operator):
 
     @staticmethod
     def compute(job, progress):
-        entries, warnings = {e.file: e for e in job.keep}, []
-        if job.items or job.gone:
-            entries, _, warnings = update_library(job.folder, job.items, job.keep, progress, 0.0, 0.6)
-        progress(0.6, "describing the photo")
-        photo = retrieval.photo_descriptor(job.rgb)
-        progress(0.8, f"comparing with {len(entries)} models")
-        ranking = retrieval.rank(photo, {k: e.descriptor for k, e in entries.items()})
-        return photo, ranking, warnings, len(job.items)
+        return retrieval.search(job.folder, job.rgb, job.items, job.keep, job.gone, progress)
 
     def finish(self, context, job, result):
         photo, ranking, warnings, redone = result

@@ -29,7 +29,7 @@ pytestmark = pytest.mark.blender
 
 #: the operators that run compute() in a worker thread from the sidebar (issue 14 point 4)
 THREADED = ("saliency_preview", "segment", "smooth_cuts", "select_area", "unfold", "make_shell", "print_segment",
-            "orient_parts")
+            "orient_parts", "build_library", "retrieve")
 #: the one that keeps its own step job (one job step per timer tick; Esc keeps the best so far)
 STEPPED = ("improve_flattenability",)
 
@@ -278,7 +278,7 @@ def test_long_operators_are_threaded(bpy_addon):
 
 # ------------------------------------------------------------------ the real operators
 def operator_class(name):
-    for mod in ("analysis_ops", "cut_ops", "area_ops", "pattern_ops", "shell_ops", "print_ops"):
+    for mod in ("analysis_ops", "cut_ops", "area_ops", "pattern_ops", "shell_ops", "print_ops", "retrieval_ops"):
         m = sys.modules[f"bolus.bolus_addon.{mod}"]
         for v in vars(m).values():
             if isinstance(v, type) and getattr(v, "bl_idname", None) == f"bolus.{name}":

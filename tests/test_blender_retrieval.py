@@ -132,3 +132,25 @@ def test_bad_photo_and_library_are_refused(bpy_addon, scene, tmp_path, capfd):
     out = reports(capfd)
     assert "broken.stl left out of the library: broken.stl is not an STL file" in out, out
     assert "1 models (1 described" in out
+
+
+def test_retrieve_threaded_as_from_the_panel(bpy_addon, scene, tmp_path):
+    """The panel's way in: prepare in the main thread (photo, .blend models), compute in a worker that
+    calls no bpy and no Blender-layer code (the modal harness's call watch), finish writes the result."""
+    from test_blender_modal import modal_run
+
+    bpy = bpy_addon
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    library(bpy, lib)
+    V, F = ellipsoid()
+    me = bpy.data.meshes.new("query")
+    me.from_pydata(V.tolist(), [], F.tolist())
+    q = bpy.data.objects.new("query", me)
+    bpy.context.scene.collection.objects.link(q)
+    photo = render_object(bpy, q, tmp_path / "photo.png")
+    bpy.context.view_layer.objects.active = q
+    op = modal_run(bpy, "retrieve", {"filepath": photo, "directory": str(lib), "count": 3}, cancel_first=False)
+    found = json.loads(bpy.context.scene["bolus_retrieval"])
+    assert len(found) == 3 and (lib / "bolus_library.npz").is_file()
+    assert any(r[1].startswith("Best match for photo.png") for r in op.reports), op.reports

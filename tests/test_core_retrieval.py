@@ -16,12 +16,8 @@ def write_obj(path, V, F):
 
 def describe_all(folder):
     keep, todo, gone = retrieval.plan_update(folder, retrieval.SETTINGS)
-    new = []
-    for p in todo:
-        V, F = retrieval.read_model(p)
-        size, sha1 = retrieval.fingerprint(p)
-        new.append(retrieval.LibraryEntry(p.name, size, sha1, retrieval.model_descriptor(V, F)))
-    retrieval.save_cache(folder, keep + new, retrieval.SETTINGS)
+    entries, new, warnings = retrieval.update_library(folder, [(p, p) for p in todo], keep, lambda f, t: None, 0, 1)
+    assert not warnings and set(entries) == {e.file for e in keep + new}
     return keep, new, gone
 
 

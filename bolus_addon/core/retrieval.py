@@ -41,6 +41,9 @@ __all__ = [
     "model_descriptor",
     "photo_descriptor",
     "rank",
+    "describe_models",
+    "update_library",
+    "search",
 ]
 
 CACHE_FILE = "bolus_library.npz"
@@ -229,3 +232,45 @@ def rank(query: Descriptor, library: dict) -> list[tuple[str, float]]:
     scores = [(name, float(dissimilarity(query.samples, d.samples))) for name, d in library.items()]
     return sorted(scores, key=lambda x: (x[1], x[0]))
 
+
+def describe_models(items, progress, start: float, span: float) -> tuple[list, list[str]]:
+    """(LibraryEntry list, warnings) for ``items``: (file, (V, F) or the file itself to read here); one
+    model that cannot be read or described is left out with a warning (bpy-free: a worker thread)."""
+    entries, warnings = [], []
+    for k, (path, data) in enumerate(items):
+        progress(start + span * k / max(len(items), 1), f"model {k + 1}/{len(items)}: {path.name}")
+        try:
+            V, F = read_model(path) if isinstance(data, Path) else data
+            desc = model_descriptor(V, F)
+        except BolusError as exc:  # one bad model does not stop the library
+            warnings.append(f"{path.name} left out of the library: {exc}")
+            continue
+        size, sha1 = fingerprint(path)
+        entries.append(LibraryEntry(path.name, size, sha1, desc, {"vertices": int(len(V)), "triangles": int(len(F))}))
+    return entries, warnings
+
+
+def update_library(folder: str, items, keep, progress, start: float, span: float):
+    """Describe ``items`` (`describe_models`), save the cache with the still valid ``keep`` entries
+    -> (entries by file name, the new entries, warnings)."""
+    new, warnings = describe_models(items, progress, start, span)
+    entries = sorted(keep + new, key=lambda e: e.file)
+    if not entries:
+        raise BolusError(f"no model of the library {folder} could be described: " + "; ".join(warnings))
+    save_cache(folder, entries, SETTINGS)
+    return {e.file: e for e in entries}, new, warnings
+
+
+def search(folder, rgb, items, keep, gone, progress) -> tuple[Descriptor, list, list[str], int]:
+    """Retrieval of a photo rgb (H,W,3) in a library (bpy-free: a worker thread): the cache brought up
+    to date first when ``items`` (to describe) or ``gone`` (removed files) say so, then the photo
+    described and the library ranked -> (photo descriptor, [(file, dissimilarity)] best first,
+    warnings, models described)."""
+    entries, warnings = {e.file: e for e in keep}, []
+    if items or gone:
+        entries, _, warnings = update_library(folder, items, keep, progress, 0.0, 0.6)
+    progress(0.6, "describing the photo")
+    photo = photo_descriptor(rgb)
+    progress(0.8, f"comparing with {len(entries)} models")
+    ranking = rank(photo, {k: e.descriptor for k, e in entries.items()})
+    return photo, ranking, warnings, len(items)
