@@ -118,8 +118,9 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
         obj[PROP_PRINT_TABLE] = json.dumps({**table, "method": self.method})
         note = open_surface_note(topo)
         self.warn_all(warnings + [m for m in [seg.count_note()] if m])
-        if hasattr(seg, "summary"):  # the learned split: what the data gave
-            self.report({"INFO"}, f"Learned split: {seg.summary()}")
+        line = seg.summary()  # the learned split: what the data gave
+        if line:
+            self.report({"INFO"}, f"Learned split: {line}")
         self.report({"INFO"}, f"Split '{obj.name}' into {seg.part_count} print parts ({self.method}; largest/smallest "
                               f"area {table['area_balance']:.2f}); attribute '{ATTR_PRINT_PART}'"
                               + (f"; {note}" if note else ""))

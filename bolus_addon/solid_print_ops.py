@@ -186,8 +186,9 @@ def finish_solid(op, context, job, result) -> set[str]:
     obj[PROP_PRINT_TABLE] = json.dumps(table)
     obj[PROP_CONNECTORS] = connectors_json(parts)
     op.warn_all(warnings + closed_warnings(closed))
-    if hasattr(seg, "summary"):  # the learned split: what the data gave
-        op.report({"INFO"}, f"Learned split of the skin: {seg.summary()}")
+    line = seg.summary()  # the learned split: what the data gave
+    if line:
+        op.report({"INFO"}, f"Learned split of the skin: {line}")
     n_conn = sum(len(j.connectors) for j in parts.joints)
     op.report({"INFO"}, f"Split '{obj.name}' into {k} solid print parts ({op.method}; largest/smallest skin area "
                         f"{table['area_balance']:.2f}), {len(parts.joints)} joints, {n_conn} connectors "

@@ -65,7 +65,7 @@ from threadpoolctl import threadpool_limits
 
 from .clustering import cluster_rows
 from .errors import BolusError
-from .image_edges import as_image, edge_mask
+from .image_edges import as_image, checked_float, edge_mask
 from .spectral import as_rng, graph_laplacian, smallest_eigenvectors
 
 __all__ = ["N_MAX", "W_COLOUR", "NEIGHBOURS", "BRIDGE_WEIGHT", "STRONG_WEIGHT", "MIN_GROUP", "SEPARATE", "MAX_SPLITS",
@@ -321,12 +321,7 @@ def contour_pixels(rgb, mask=None, w: float = W_COLOUR, neighbours: int = NEIGHB
         if m.dtype.kind not in "biuf" or not np.isin(m, (0, 1)).all():
             raise BolusError("the edge mask must be a boolean (H, W) array")
         m = m.astype(bool)
-    try:
-        w = float(w)
-    except (TypeError, ValueError):
-        raise BolusError(f"the colour weight w must be a number >= 0, got {w!r}") from None
-    if not (np.isfinite(w) and w >= 0):
-        raise BolusError(f"the colour weight w must be a number >= 0, got {w}")
+    w = checked_float(w, lambda x: np.isfinite(x) and x >= 0, "the colour weight w must be a number >= 0")
     if isinstance(neighbours, bool) or not isinstance(neighbours, (int, np.integer)) or neighbours < 2:
         raise BolusError(f"neighbours must be an integer >= 2, got {neighbours!r}")
     if isinstance(max_points, bool) or not isinstance(max_points, (int, np.integer)) or max_points < 100:

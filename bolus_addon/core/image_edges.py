@@ -161,6 +161,17 @@ def block_entropy(texture: np.ndarray, edge: np.ndarray, eta=(1.0, 1.0)) -> np.n
     return e1 * np.asarray(texture, dtype=np.float64) + e2 * np.asarray(edge, dtype=np.float64)
 
 
+def checked_float(value, ok, message: str) -> float:
+    """float(value) when ``ok`` holds for it, else BolusError "<message>, got <value>"."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise BolusError(f"{message}, got {value!r}") from None
+    if not ok(x):
+        raise BolusError(f"{message}, got {value!r}")
+    return x
+
+
 def _check_eta(eta) -> tuple[float, float]:
     try:
         e1, e2 = (float(v) for v in eta)
@@ -198,19 +209,10 @@ def edge_mask(rgb, k: int = 3, eta=(1.0, 1.0), fraction: float = 0.1, levels: in
     (>= 0) of the intensity first.  With ``return_blocks`` also the
     (H-k+1, W-k+1) bool edge blocks.  BolusError when the image has no edges (it is uniform).
     """
-    try:
-        fraction = float(fraction)
-    except (TypeError, ValueError):
-        raise BolusError(f"fraction must be a number in (0, 1], got {fraction!r}") from None
-    if not 0.0 < fraction <= 1.0:
-        raise BolusError(f"fraction must be in (0, 1] (the share of blocks that are edge blocks), got {fraction}")
+    fraction = checked_float(fraction, lambda x: 0.0 < x <= 1.0,
+                             "fraction must be a number in (0, 1] (the share of blocks that are edge blocks)")
     e1, e2 = _check_eta(eta)
-    try:
-        smooth = float(smooth)
-    except (TypeError, ValueError):
-        raise BolusError(f"smooth must be a blur radius in pixels >= 0, got {smooth!r}") from None
-    if not (np.isfinite(smooth) and smooth >= 0):
-        raise BolusError(f"smooth must be a blur radius in pixels >= 0, got {smooth}")
+    smooth = checked_float(smooth, lambda x: np.isfinite(x) and x >= 0, "smooth must be a blur radius in pixels >= 0")
     gray = intensity(rgb)
     k, levels = _check_k_levels(gray.shape, k, levels)
     if smooth > 0:

@@ -108,19 +108,29 @@ def _sq_dists(X: np.ndarray) -> np.ndarray:
     return D
 
 
-def _kernel(D: np.ndarray) -> np.ndarray:
-    n = len(D)
-    mean = D.sum() / max(n * (n - 1), 1)
-    return np.exp(-D / (2.0 * mean)) if mean > 0 else np.ones_like(D)
+def _kernel(D: np.ndarray, mean: float | None = None) -> tuple[np.ndarray, float]:
+    """exp(-D / (2 mean)) of squared distances D and the width ``mean`` used: by default the mean of the
+    square matrix D off its diagonal (module doc); all ones when that is 0."""
+    if mean is None:
+        n = len(D)
+        mean = D.sum() / max(n * (n - 1), 1)
+    return (np.exp(-D / (2.0 * mean)) if mean > 0 else np.ones_like(D)), mean
+
+
+def _similarity(g, pf=None) -> tuple[np.ndarray, tuple]:
+    """`similarity` and its kernel widths (the mean squared distances of g and of pf)."""
+    S, wg = _kernel(_sq_dists(np.asarray(g, dtype=np.float64)))
+    wf = None
+    if pf is not None:
+        Sf, wf = _kernel(_sq_dists(np.asarray(pf, dtype=np.float64)))
+        S += Sf
+    return S, (wg, wf)
 
 
 def similarity(g, pf=None) -> np.ndarray:
     """Eq. 3-14 (as read in the module doc): (N, N) similarity of N sub-graphs from their
     central triangles' centroids g (N, 3) and hidden features pf (N, d) (None: geometric only)."""
-    S = _kernel(_sq_dists(np.asarray(g, dtype=np.float64)))
-    if pf is not None:
-        S += _kernel(_sq_dists(np.asarray(pf, dtype=np.float64)))
-    return S
+    return _similarity(g, pf)[0]
 
 
 def affinity_propagation(S, rng=0, damping: float = DAMPING, max_iter: int = MAX_ITER,
@@ -174,20 +184,16 @@ def _cluster_subgraphs(g, pf, rng, max_exemplar_set: int, **ap_kw) -> tuple[np.n
         return lab, len(ex), it
     rng = as_rng(rng)
     sub = _spread(g, max_exemplar_set, rng)
-    lab_s, ex, it = affinity_propagation(similarity(g[sub], None if pf is None else pf[sub]), rng, **ap_kw)
+    S_sub, (wg, wf) = _similarity(g[sub], None if pf is None else pf[sub])
+    lab_s, ex, it = affinity_propagation(S_sub, rng, **ap_kw)
     exemplars = sub[ex]
-    # the similarity to each exemplar, with the sample's kernel widths (eq. 3-14, module doc)
-    def widths(X):
-        D = _sq_dists(X[sub])
-        return D.sum() / max(len(sub) * (len(sub) - 1), 1)
 
-    def k(X, w):
-        D = ((X[:, None, :] - X[exemplars][None, :, :]) ** 2).sum(axis=2)
-        return np.exp(-D / (2.0 * w)) if w > 0 else np.ones_like(D)
+    def to_exemplars(X, width):  # eq. 3-14 between every sub-graph and each exemplar, the sample's widths
+        return _kernel(((X[:, None, :] - X[exemplars][None, :, :]) ** 2).sum(axis=2), width)[0]
 
-    S = k(g, widths(g))
+    S = to_exemplars(g, wg)
     if pf is not None:
-        S += k(pf, widths(pf))
+        S += to_exemplars(pf, wf)
     lab = np.argmax(S, axis=1)  # eq. 3-13 with the exemplars fixed
     lab[sub] = lab_s
     return lab.astype(np.int64), len(ex), it

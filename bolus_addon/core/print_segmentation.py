@@ -169,6 +169,10 @@ class PrintSegmentation:
         return (f"{p} parts instead of the {self.requested} asked: clusters that fell apart became separate parts, "
                 f"pieces under {100 * self.min_part_fraction:g} % of the area were merged")
 
+    def summary(self) -> str | None:
+        """A line for the user on how the parts were found (the learned split's); None here."""
+        return None
+
     def table(self, V, F, topo: MeshTopology | None = None) -> dict:
         """The parts' rows (`part_stats`) and their area balance, as JSON-ready data."""
         topo = MeshTopology(V, F) if topo is None else topo

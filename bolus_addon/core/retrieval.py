@@ -186,13 +186,6 @@ def plan_update(directory, settings: dict) -> tuple[list[LibraryEntry], list[Pat
     return keep, todo, gone
 
 
-def timed(fn, *args, **kwargs):
-    """(result, seconds) of fn(*args, **kwargs)."""
-    t = time.perf_counter()
-    out = fn(*args, **kwargs)
-    return out, time.perf_counter() - t
-
-
 def _descriptor(skel, kind: str, size: int, seconds: float) -> Descriptor:
     from .spectral_skeleton import skeleton_samples  # noqa: PLC0415
 
