@@ -4,7 +4,7 @@ The pattern object is read like any region (`mesh_io.read_region`: world coordin
 mm, the one place that converts scene units), grouped by piece (`core.pattern_mesh.export_pieces`),
 its matching marks found from the source vertex of every pattern vertex
 (`core.pattern_marks.pattern_marks`: seams between pieces, darts and joins within one) and
-written by `core.pattern_drawing.write_pattern`, which picks the format from the file's
+written by `core.pattern_export.write_pattern`, which picks the format from the file's
 extension and writes atomically (nothing half-written is ever left behind).
 """
 from __future__ import annotations
@@ -17,7 +17,7 @@ from bpy.props import EnumProperty, StringProperty
 
 from . import mesh_io
 from .core.errors import BolusError
-from .core.pattern_drawing import write_pattern
+from .core.pattern_export import write_pattern
 from .core.pattern_marks import PatternMarks, pattern_marks
 from .core.pattern_mesh import export_pieces
 from .operators import ATTR_PATCH, BolusOperator

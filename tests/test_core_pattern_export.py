@@ -13,7 +13,8 @@ from test_core_pattern_svg import perimeter, three_islands
 
 from bolus_addon.core import pattern_drawing as pdraw
 from bolus_addon.core.errors import BolusError
-from bolus_addon.core.pattern_drawing import TEST_SQUARE_MM, pattern_drawing, write_pattern
+from bolus_addon.core.pattern_drawing import TEST_SQUARE_MM, pattern_drawing
+from bolus_addon.core.pattern_export import write_pattern
 from bolus_addon.core.pattern_marks import pattern_marks
 from bolus_addon.core.pattern_pdf import FOOTER_MM, PAGE_MARGIN_MM, TILE_OVERLAP_MM
 from bolus_addon.core.pattern_svg import signed_area, svg_outline_paths
@@ -219,7 +220,7 @@ def test_pdf_needs_no_pillow(tmp_path):
     code = (
         "import sys; sys.modules['PIL'] = None\n"
         "import numpy as np\n"
-        "from bolus_addon.core.pattern_drawing import write_pattern\n"
+        "from bolus_addon.core.pattern_export import write_pattern\n"
         "UV = np.array([[0.0, 0], [40, 0], [0, 30]])\n"
         f"info = write_pattern({str(tmp_path / 'x.pdf')!r}, [{{'UV': UV, 'F': [[0, 1, 2]]}}], page='A4')\n"
         "print(info['pages'], 'PIL' in sys.modules and sys.modules['PIL'] is not None)\n")

@@ -12,7 +12,6 @@ from bolus_addon.core.print_orientation import (
     fibonacci_sphere,
     normal_curvature,
     orient,
-    orient_parts,
     overhang_faces,
     place_on_plate,
     print_objective,
@@ -230,8 +229,9 @@ def test_bad_input_is_refused():
 from meshgen import degenerate_variants  # noqa: E402
 
 from bolus_addon.core.print_measures import PrintTerms, open_surface_note  # noqa: E402
-from bolus_addon.core.print_orientation import (  # noqa: E402
+from bolus_addon.core.print_parts import (  # noqa: E402
     PrintPlan,
+    orient_parts,
     orient_print_parts,
     skin_side_up_direction,
 )

@@ -48,7 +48,7 @@ from scipy.optimize import minimize
 from threadpoolctl import threadpool_limits
 
 from .errors import BolusError
-from .spectral import as_rng
+from .rng import as_rng
 
 MIN_ROWS = 10  # fewer samples than this are refused for training
 _EPS = 1e-12  # rho_hat is kept inside [eps, 1 - eps] in the KL term (only reached at a saturated unit)

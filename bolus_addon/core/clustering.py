@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import BolusError
+from .rng import as_rng
 
 __all__ = ["METHODS", "REG_COVAR", "KMEANS_RESTARTS", "GMM_RESTARTS", "WEIGHTED_DRAWS", "standardise_rows",
            "cluster_rows"]
@@ -57,8 +58,6 @@ def cluster_rows(U, k: int, method: str = "kmeans", rng=None, weights=None) -> n
     """
     from sklearn.cluster import KMeans
     from sklearn.mixture import GaussianMixture
-
-    from .spectral import as_rng  # spectral re-exports this module's cluster_rows
 
     if method not in METHODS:
         raise BolusError(f"unknown clustering method {method!r}; use 'kmeans' or 'gmm'")

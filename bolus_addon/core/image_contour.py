@@ -66,7 +66,8 @@ from threadpoolctl import threadpool_limits
 from .clustering import cluster_rows
 from .errors import BolusError
 from .image_edges import as_image, checked_float, edge_mask
-from .spectral import as_rng, graph_laplacian, smallest_eigenvectors
+from .rng import as_rng
+from .spectral import graph_laplacian, smallest_eigenvectors
 
 __all__ = ["N_MAX", "W_COLOUR", "NEIGHBOURS", "BRIDGE_WEIGHT", "STRONG_WEIGHT", "MIN_GROUP", "SEPARATE", "MAX_SPLITS",
            "CLOSE_FRACTION", "CLOSE_MIN", "MIN_PIECE", "ContourResult", "contour_pixels", "sample_grid", "edge_graph",

@@ -50,8 +50,9 @@ import numpy as np
 
 from .errors import BolusError
 from .print_orientation import orient
-from .print_segmentation import MIN_PART_FRACTION, PrintSegmentation
-from .spectral import as_rng, connected_patches, vote_groups
+from .print_segments import MIN_PART_FRACTION, PrintSegmentation
+from .rng import as_rng
+from .spectral import connected_patches, vote_groups
 from .subgraphs import SIZE, SubGraphs, build_subgraphs, print_features, subgraph_rows
 from .topology import MeshTopology, check_mesh
 

@@ -22,8 +22,6 @@ Also here (re-exported by `pattern_svg`): `outline_loops` / `outline_loop_indice
 """
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,7 +38,6 @@ __all__ = [
     "DrawnPiece",
     "Drawing",
     "pattern_drawing",
-    "write_pattern",
     "outline_loops",
     "outline_loop_indices",
     "TEST_SQUARE_MM",
@@ -497,82 +494,3 @@ def test_square_strokes(x: float, y: float, size: float = TEST_SQUARE_MM) -> tup
 
 
 test_square_strokes.__test__ = False  # not a pytest test
-
-
-# --------------------------------------------------------------------------- writing
-FORMATS = (".svg", ".dxf", ".pdf")
-
-
-def _target(path) -> tuple[str, str]:
-    """(absolute path, extension); BolusError for no path, an unknown extension or a missing folder."""
-    if not path:
-        raise BolusError("choose a file to write the pattern to")
-    path = os.path.abspath(os.fspath(path))
-    ext = os.path.splitext(path)[1].lower()
-    if ext not in FORMATS:
-        raise BolusError(f"the pattern file must end in .svg, .dxf or .pdf, got '{os.path.basename(path)}'")
-    folder = os.path.dirname(path)
-    if not os.path.isdir(folder):
-        raise BolusError(f"cannot write '{path}': the folder '{folder}' does not exist")
-    if os.path.isdir(path):
-        raise BolusError(f"cannot write '{path}': it is a folder")
-    return path, ext
-
-
-def write_atomic(path: str, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file in the same folder and os.replace:
-    either the whole file is there or nothing changed; BolusError naming the path otherwise."""
-    folder = os.path.dirname(os.path.abspath(path))
-    tmp = None
-    try:
-        fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp", dir=folder)
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-        tmp = None
-    except OSError as exc:
-        raise BolusError(f"could not write '{path}': {exc.strerror or exc}") from None
-    finally:
-        if tmp is not None and os.path.exists(tmp):
-            os.unlink(tmp)
-
-
-def write_pattern(path, pieces, marks=None, *, page: str = "NONE", label: str = "", title: str = "",
-                  seam_allowance_mm: float = 0.0) -> dict:
-    """Write the pattern as SVG, DXF or PDF (by the extension of ``path``), atomically.
-
-    Parameters
-    ----------
-    path : the file (.svg / .dxf / .pdf; anything else: BolusError naming the three)
-    pieces, marks, label, title, seam_allowance_mm : as `pattern_drawing`
-    page : 'NONE' | 'A4' | 'LETTER' - the PDF's paper: 'NONE' one page the size of the
-        drawing, A4 / Letter tiled with overlap and alignment marks (`pattern_pdf`); the
-        SVG and DXF are always one sheet in mm
-
-    Returns
-    -------
-    {"path", "format", "pages", "pieces", "seams", "darts", "width_mm", "height_mm"} and, for a
-    PDF, "tiles": [(row, col, x0, y0, w, h)] the drawing's window (paper mm) on every page.
-    Nothing is written (and no temporary file left) when anything fails.
-    """
-    page = str(page or "NONE").upper()
-    if page not in ("NONE", *PAGES):
-        raise BolusError(f"page must be 'NONE', 'A4' or 'LETTER', got {page!r}")
-    path, ext = _target(path)
-    drawing = pattern_drawing(pieces, marks, label=label, title=title, seam_allowance_mm=seam_allowance_mm)
-    info = {"path": path, "format": ext[1:], "pages": 1, "pieces": len(drawing.pieces),
-            "seams": len(marks.seams) if marks is not None else 0,
-            "darts": len(marks.darts) if marks is not None else 0,
-            "width_mm": drawing.width, "height_mm": drawing.height}
-    if ext == ".svg":
-        from .pattern_svg import drawing_svg
-        data = drawing_svg(drawing).encode("utf-8")
-    elif ext == ".dxf":
-        from .pattern_dxf import drawing_dxf
-        data = drawing_dxf(drawing)
-    else:
-        from .pattern_pdf import drawing_pdf
-        data, tiles = drawing_pdf(drawing, page)
-        info["pages"], info["tiles"] = len(tiles), tiles
-    write_atomic(path, data)
-    return info

@@ -35,7 +35,7 @@ the favoured side never looks down).  A hard constraint, not a penalty, so WQ/WU
 their meaning.
 
 `place_on_plate` / `rotation_to_z` turn a part to its direction; orienting every part
-of a model (`orient_print_parts`, the seed's Tables 6-1, 6-2) lives in print_parts.py.
+of a model (`orient_print_parts`, the seed's Tables 6-1, 6-2) is in print_parts.py.
 The measures and normal curvature live in print_measures.py and curvature.py; this
 module re-exports their public names.
 """
@@ -62,7 +62,7 @@ from .print_measures import (
     surface_quality,
     unit_rows,
 )
-from .spectral import as_rng
+from .rng import as_rng
 from .topology import MeshTopology, check_mesh, submesh
 
 __all__ = [
@@ -82,10 +82,7 @@ __all__ = [
     "normal_curvature",
     "rotation_to_z",
     "place_on_plate",
-    "skin_side_up_direction",
     "orient",
-    "orient_parts",
-    "orient_print_parts",
 ]
 
 N_SCREEN = 2048  #: screened directions: about 4.5 deg apart, finer than the objective's basins
@@ -428,15 +425,3 @@ def orient(
     report(1.0, "done")
     return Orientation(best_b, float(WQ[0]), float(WU[0]), float(SV[0]), float(WQ[0] + WU[0]),
                        s.evaluations + 1, int(np.isfinite(sc.f).sum()), Bc[sel])
-
-
-_PARTS = ("PartRow", "PrintPlan", "orient_parts", "orient_print_parts", "skin_side_up_direction")
-
-
-def __getattr__(name: str):
-    """The parts of a model live in print_parts.py (which imports this module): re-exported lazily."""
-    if name in _PARTS:
-        from . import print_parts
-
-        return getattr(print_parts, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

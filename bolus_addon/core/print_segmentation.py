@@ -51,8 +51,6 @@ Choices where the seed is vague:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import scipy.sparse as sp
 
@@ -67,6 +65,7 @@ from .spectral import (
     smallest_eigenvectors,
     vote_groups,
 )
+from .print_segments import MIN_PART_FRACTION, PrintPart, PrintSegmentation, area_balance, part_stats
 from .topology import MeshTopology, check_mesh
 
 __all__ = [
@@ -84,7 +83,6 @@ __all__ = [
 METHODS = ("abcut", "ratiocut", "learned")  #: "learned": learned_segmentation.py (seed 6.4)
 ALIKE_DEG, APART_DEG = 30.0, 60.0  #: q' = 1 under 30 deg between normals, 0.5 under 60, else 0 (seed's 3 levels)
 CONCAVE_PER_MM = 0.02  #: u': a face is concave with a radius of curvature under 50 mm (eq. 6-19's eps)
-MIN_PART_FRACTION = 0.05  #: parts under 5 % of the area are merged: a smaller part is not worth a print
 AREA_FLOOR = 1e-3  #: F^-1/2 of a (nearly) zero-area face uses 1e-3 x the median area: finite, tiny weight
 
 
@@ -132,55 +130,6 @@ def abcut_laplacian(L: sp.spmatrix, areas: np.ndarray) -> tuple[sp.csr_matrix, n
     return (0.5 * (Lp + Lp.T)).tocsr(), s
 
 
-@dataclass
-class PrintPart:
-    """One part of a print segmentation."""
-
-    part: int
-    faces: int
-    vertices: int
-    area_mm2: float
-
-    def as_dict(self) -> dict:
-        return dict(self.__dict__)
-
-
-@dataclass
-class PrintSegmentation:
-    """Result of `print_segmentation` on a mesh with m triangles."""
-
-    labels: np.ndarray  #: (m,) part of each triangle, 0..p-1, by decreasing area
-    clusters: np.ndarray  #: (m,) raw Gaussian-mixture cluster of each triangle
-    eigenvalues: np.ndarray  #: (k,)
-    embedding: np.ndarray  #: (m,k) U' (abcut) or U (ratiocut)
-    method: str
-    requested: int
-    min_part_fraction: float = MIN_PART_FRACTION  #: parts below this fraction of the area were merged
-
-    @property
-    def part_count(self) -> int:
-        return int(self.labels.max()) + 1 if self.labels.size else 0
-
-    def count_note(self) -> str | None:
-        """Why the part count differs from the one asked, or None."""
-        p = self.part_count
-        if p == self.requested:
-            return None
-        return (f"{p} parts instead of the {self.requested} asked: clusters that fell apart became separate parts, "
-                f"pieces under {100 * self.min_part_fraction:g} % of the area were merged")
-
-    def summary(self) -> str | None:
-        """A line for the user on how the parts were found (the learned split's); None here."""
-        return None
-
-    def table(self, V, F, topo: MeshTopology | None = None) -> dict:
-        """The parts' rows (`part_stats`) and their area balance, as JSON-ready data."""
-        topo = MeshTopology(V, F) if topo is None else topo
-        return {"method": self.method, "requested": self.requested,
-                "parts": [r.as_dict() for r in part_stats(V, F, self.labels, topo)],
-                "area_balance": area_balance(self.labels, topo.areas)}
-
-
 def print_segmentation(
     V,
     F,
@@ -210,7 +159,7 @@ def print_segmentation(
     report = progress or (lambda f, t: None)
     k = _check_request(parts, method, min_part_fraction)
     if method == "learned":  # the number of parts comes from the data: ``parts`` is not used
-        from .learned_segmentation import learned_segmentation  # noqa: PLC0415 (it imports this module)
+        from .learned_segmentation import learned_segmentation  # noqa: PLC0415 (loaded only when asked for)
 
         return learned_segmentation(V, F, rng=rng, topo=topo, min_part_fraction=min_part_fraction,
                                     face_groups=face_groups, progress=progress)
@@ -275,28 +224,3 @@ def print_segment(V, F, parts: int = 3, method: str = "abcut", rng=0, topo: Mesh
                   **kwargs) -> np.ndarray:
     """Part labels (m,) int 0..p-1 of `print_segmentation` (kwargs go there)."""
     return print_segmentation(V, F, parts, method=method, rng=rng, topo=topo, **kwargs).labels
-
-
-def part_stats(V, F, labels, topo: MeshTopology | None = None) -> list[PrintPart]:
-    """Faces, vertices and area (mm^2) of every part of ``labels`` (m,) int 0..p-1 on V (n,3), F (m,3)
-    -> p `PrintPart` rows."""
-    topo = MeshTopology(V, F) if topo is None else topo
-    labels = np.asarray(labels)
-    if labels.shape != (topo.m,):
-        raise BolusError("part labels must give one part per triangle")
-    p = int(labels.max()) + 1 if labels.size else 0
-    areas = np.bincount(labels, weights=topo.areas, minlength=p)
-    faces = np.bincount(labels, minlength=p)
-    rows = []
-    for q in range(p):
-        verts = len(np.unique(topo.F[labels == q])) if faces[q] else 0
-        rows.append(PrintPart(q, int(faces[q]), verts, float(areas[q])))
-    return rows
-
-
-def area_balance(labels, areas) -> float:
-    """Largest over smallest part area for labels (m,) int 0..p-1 and face areas (m,)
-    (1 = perfectly balanced; inf if a part is empty)."""
-    labels = np.asarray(labels)
-    a = np.bincount(labels, weights=np.asarray(areas, dtype=np.float64), minlength=int(labels.max()) + 1)
-    return float(a.max() / a.min()) if a.min() > 0 else float("inf")

@@ -44,6 +44,7 @@ from scipy.sparse.linalg import LinearOperator, eigsh, lobpcg, splu
 
 from .clustering import cluster_rows  # re-exported: the one clustering step (clustering.py)
 from .errors import BolusError
+from .rng import as_rng
 from .saliency import SaliencyResult, analyse, corner_angle_sums, flattenability, flattenability_value
 from .topology import MeshTopology, submesh  # submesh: re-exported (it lived here)
 
@@ -51,7 +52,6 @@ __all__ = [
     "HIGH_SALIENCY",
     "PatchStats",
     "Segmentation",
-    "as_rng",
     "unit_interval",
     "affinity",
     "gaussian_weights",
@@ -77,11 +77,6 @@ HIGH_SALIENCY = 0.25
 #: bench/segment_bench.py meshes) the exact path is kept unchanged.
 MULTILEVEL_MIN_VERTICES = 150_000
 D_CLIP = 3.0  #: distances clipped at 3 sigma: every edge weight >= exp(-4.5) ~ 0.011 (see `gaussian_weights`)
-
-
-def as_rng(rng) -> np.random.Generator:
-    """``rng`` as a Generator (accepts None, an int seed or a Generator)."""
-    return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
 
 
 def unit_interval(x: np.ndarray, lo_pct: float = 1.0, hi_pct: float = 99.0) -> np.ndarray:

@@ -69,7 +69,8 @@ from threadpoolctl import threadpool_limits
 
 from .clustering import REG_COVAR
 from .errors import BolusError
-from .spectral import as_rng, gaussian_weights, graph_laplacian, smallest_eigenvectors
+from .rng import as_rng
+from .spectral import gaussian_weights, graph_laplacian, smallest_eigenvectors
 from .topology import MeshTopology
 
 __all__ = [
