@@ -29,7 +29,17 @@ for _p in (ROOT, ROOT / "tests"):
     if str(_p) not in sys.path:
         sys.path.insert(0, str(_p))
 
-SHARED_MESHES = Path(os.environ.get("BOLUS_SHARED_MESHES", ROOT.parent / "shared" / "meshes"))
+from paths import DATA, data_mesh  # noqa: E402 (tests/paths.py: assets/, then tests/data/)
+
+
+def mesh_exists(name: str) -> bool:
+    """Whether the repository has the mesh ``name`` (assets/ or tests/data/)."""
+    try:
+        data_mesh(name)
+    except FileNotFoundError:
+        return False
+    return True
+
 BENCH_DOC = ROOT / "docs" / "benchmarks.md"
 
 

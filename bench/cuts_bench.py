@@ -22,7 +22,7 @@ and the *smooth* one after ``bolus.smooth_cuts()``.  Printed:
 * EL and EA of ``bolus.unfold()`` on both copies (SPEC measures, whole pattern and per
   patch): the seed's Table 4-5 says they should stay about equal or improve.
 
-Meshes come from ``<repo>/../shared/meshes`` (override with BOLUS_SHARED_MESHES);
+Meshes come from the repository's ``assets/`` and ``tests/data/``;
 units as in bench/segment_bench.py.
 """
 from __future__ import annotations
@@ -41,9 +41,8 @@ for p in (ROOT, ROOT / "bench"):
     if str(p) not in sys.path:
         sys.path.insert(0, str(p))
 
-from benchutil import captured_output, clean_scene, import_mesh, write_json  # noqa: E402
+from benchutil import captured_output, clean_scene, data_mesh, import_mesh, mesh_exists, write_json  # noqa: E402
 
-SHARED_MESHES = Path(os.environ.get("BOLUS_SHARED_MESHES", ROOT.parent / "shared" / "meshes"))
 PATCHES, ETA, SEED = 4, 5.0, 0
 TARGET = 0.70  # turning per mm must drop by at least this fraction
 STRAIGHT = 0.005  # rad/mm: a border turning less than this is already straight (nothing to remove)
@@ -101,7 +100,7 @@ def pattern_figures(bpy, ob) -> dict:
 
 def bench_mesh(bpy, fname: str, scale_length: float, patches: int, args) -> dict:
     clean_scene(bpy)
-    ob = import_mesh(bpy, SHARED_MESHES / fname, scale_length)
+    ob = import_mesh(bpy, data_mesh(fname), scale_length)
     ob.name = Path(fname).stem
     call(bpy, bpy.ops.bolus.segment, ob, args.verbose, patches=patches, eta=ETA, seed=SEED)
     jag = duplicate(bpy, ob, ob.name + "_jagged")
@@ -169,8 +168,8 @@ def main(argv=None) -> int:
     for fname, scale, patches in MESHES:
         if args.quick and fname not in QUICK:
             continue
-        if not (SHARED_MESHES / fname).exists():
-            print(f"skipped {fname}: not found in {SHARED_MESHES}")
+        if not mesh_exists(fname):
+            print(f"skipped {fname}: not in assets/ or tests/data/")
             continue
         row = bench_mesh(bpy, fname, scale, patches, args)
         print_row(row)

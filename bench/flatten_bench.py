@@ -51,7 +51,7 @@ The seed's figures are the reference rows: FLV 0.65 -> 5.03 (89 nodes, largest g
 iterations) and 0.12 -> 0.65 (548 nodes, 0.33 mm, 70,000 iterations).  Targets (the issue's):
 at least the seed's relative gain within 1 mm (7.7 on the free-form patch, 5.4 on the noses),
 under 10 s for 1,000 vertices, EL after <= 1.02 x EL before.
-Meshes come from ``<repo>/../shared/meshes`` (override with BOLUS_SHARED_MESHES).
+Meshes come from the repository's ``assets/`` and ``tests/data/``.
 """
 from __future__ import annotations
 
@@ -118,9 +118,9 @@ def concave_spot(V, F, tip: int, offset_xy, topo=None) -> int:
     """The most concave front-facing vertex near nose tip + offset_xy (front view x, y in mm; module doc)."""
     import numpy as np
 
-    from bolus_addon.core.curvature import normal_curvature
-    from bolus_addon.core.saliency import smooth_for_analysis
-    from bolus_addon.core.topology import MeshTopology
+    from bolus_addon.core.analysis.curvature import normal_curvature
+    from bolus_addon.core.analysis.saliency import smooth_for_analysis
+    from bolus_addon.core.mesh.topology import MeshTopology
 
     topo = MeshTopology(V, F) if topo is None else topo
     K = normal_curvature(smooth_for_analysis(topo, SPOT_SMOOTHING_MM), F).vertex
@@ -172,7 +172,7 @@ def make_cases(quick: bool = False, only=()) -> list[dict]:
         if spots:
             V0, F0 = head("ict_face_narrow.obj", 10.0)
             tip = hard_patches.nose_tip(V0)
-            from bolus_addon.core.topology import MeshTopology
+            from bolus_addon.core.mesh.topology import MeshTopology
 
             topo = MeshTopology(V0, F0)
             for name, off, target in spots:
@@ -200,7 +200,7 @@ def border_distance(V, F):
     import scipy.sparse as sp
     from scipy.sparse.csgraph import dijkstra
 
-    from bolus_addon.core.topology import MeshTopology
+    from bolus_addon.core.mesh.topology import MeshTopology
 
     topo = MeshTopology(V, F)
     E = topo.edges
@@ -218,9 +218,9 @@ def surface_figures(V, F, near=None) -> dict:
     of the near vertices and of the others (raw and 3 mm: ``..._near`` / ``..._far``)."""
     import numpy as np
 
-    from bolus_addon.core.improve_objective import uniform_laplacian
-    from bolus_addon.core.saliency import analyse
-    from bolus_addon.core.topology import MeshTopology
+    from bolus_addon.core.improve.objective import uniform_laplacian
+    from bolus_addon.core.analysis.saliency import analyse
+    from bolus_addon.core.mesh.topology import MeshTopology
 
     topo = MeshTopology(V, F)
     raw = analyse(V, F, 0.0, topo=topo)
@@ -241,7 +241,7 @@ def unfold_figures(V, F) -> dict:
     overlaps, seconds."""
     import numpy as np
 
-    from bolus_addon.core.unfold import unfold_patch
+    from bolus_addon.core.unfold.unfold import unfold_patch
     gc.collect()
     t0 = time.perf_counter()
     u = unfold_patch(V, F)
@@ -253,7 +253,7 @@ def unfold_figures(V, F) -> dict:
 
 def darts_figures(V, F, max_el: float = DART_MAX_EL) -> dict:
     """`sheet_pieces(V, F, max_el)`: pieces, darts, splits, met, worst / area-weighted EL and EA, seconds."""
-    from bolus_addon.core.sheet_pieces import sheet_pieces
+    from bolus_addon.core.unfold.sheet_pieces import sheet_pieces
 
     gc.collect()
     t0 = time.perf_counter()
@@ -270,7 +270,7 @@ def check_bounds(V, F, res, max_gap: float) -> dict:
     Also counted (not a bound): folded, the triangles whose normal turned by 90 degrees or more."""
     import numpy as np
 
-    from bolus_addon.core.topology import MeshTopology
+    from bolus_addon.core.mesh.topology import MeshTopology
 
     gap = np.asarray(res.gap, dtype=np.float64)
     topo = MeshTopology(V, F)
@@ -297,7 +297,7 @@ def run_method(V, F, method: str, max_gap: float, smoothing: float, label: str |
     """One `improve_flattenability` call (kw: its swarm settings), timed: (row of figures, the `Improvement`)."""
     import numpy as np
 
-    from bolus_addon.core.improve import improve_flattenability
+    from bolus_addon.core.improve.improve import improve_flattenability
 
     gc.collect()
     t0, c0 = time.perf_counter(), time.process_time()

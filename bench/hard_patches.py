@@ -36,7 +36,7 @@ import time
 from pathlib import Path
 
 import benchutil  # noqa: F401  (sys.path: repository root, tests/)
-from benchutil import SHARED_MESHES
+from benchutil import data_mesh
 
 NOSE_RADIUS_MM = 45.0
 CLEAN_NOSE_RADIUS_MM = 30.0
@@ -57,11 +57,9 @@ HEADS = (
 
 
 def load(fname: str, scale: float):
-    from bolus_addon.core.objfile import load_obj
+    from bolus_addon.core.mesh.objfile import load_obj
 
-    path = SHARED_MESHES / fname
-    if not path.exists():
-        raise FileNotFoundError(f"{path} not found")
+    path = data_mesh(fname)
     return load_obj(path, scale)
 
 
@@ -74,8 +72,8 @@ def nose_tip(V) -> int:
 
 def disk(V, F, centre, radius_mm: float, exclude_cavities: bool = False):
     """(V', F', area): the geodesic disk of `treatment_area` around centre, renumbered."""
-    from bolus_addon.core.topology import submesh
-    from bolus_addon.core.treatment_area import treatment_area
+    from bolus_addon.core.mesh.topology import submesh
+    from bolus_addon.core.cuts.treatment_area import treatment_area
 
     area = treatment_area(V, F, centre, radius_mm, exclude_cavities=exclude_cavities)
     Fs, ids = submesh(area.F, area.selected)
@@ -84,8 +82,8 @@ def disk(V, F, centre, radius_mm: float, exclude_cavities: bool = False):
 
 def segment3(V, F):
     """Face labels of the segment operator's core at its defaults (3 patches)."""
-    from bolus_addon.core import spectral
-    from bolus_addon.core.saliency import DEFAULT_SMOOTHING_MM
+    from bolus_addon.core.analysis import spectral
+    from bolus_addon.core.analysis.saliency import DEFAULT_SMOOTHING_MM
 
     return spectral.segment(V, F, SEG_PATCHES, eta=SEG_ETA, smoothing_mm=DEFAULT_SMOOTHING_MM, rng=SEG_RNG,
                             method="kmeans").face_labels
@@ -94,7 +92,7 @@ def segment3(V, F):
 def split_patches(V, F, labels, name: str, how: str) -> list[dict]:
     import numpy as np
 
-    from bolus_addon.core.topology import submesh
+    from bolus_addon.core.mesh.topology import submesh
 
     out = []
     for p in np.unique(labels):
@@ -105,7 +103,7 @@ def split_patches(V, F, labels, name: str, how: str) -> list[dict]:
 
 
 def nose_patches(short: str, fname: str, scale: float, tip_rule: str) -> list[dict]:
-    from bolus_addon.core.saliency import DEFAULT_SMOOTHING_MM
+    from bolus_addon.core.analysis.saliency import DEFAULT_SMOOTHING_MM
 
     V, F, _ = load(fname, scale)
     tip = nose_tip(V)
@@ -119,7 +117,7 @@ def nose_patches(short: str, fname: str, scale: float, tip_rule: str) -> list[di
 def nostril_pocket() -> list[dict]:
     import numpy as np
 
-    from bolus_addon.core.topology import MeshTopology, submesh
+    from bolus_addon.core.mesh.topology import MeshTopology, submesh
 
     V, F, _ = load("ict_face_narrow.obj", 10.0)
     tip = nose_tip(V)
@@ -169,7 +167,7 @@ def clean_nose() -> list[dict]:
     """The ICT nose region exactly as unfold_bench has cut it (whole polygons within 30 mm), segmented into 3."""
     import numpy as np
 
-    from bolus_addon.core.topology import MeshTopology, submesh
+    from bolus_addon.core.mesh.topology import MeshTopology, submesh
 
     V, F, tri_face = load("ict_face_narrow.obj", 10.0)
     tip = int(np.argmax(V[:, 2]))
@@ -259,7 +257,7 @@ def unfold_once(p: dict) -> dict:
     """Ours without refinement (`unfold_patch(V, F)`, one run): EL, EA, f/o, seconds, hopeless, angle sums."""
     import numpy as np
 
-    from bolus_addon.core.unfold import unfold_patch
+    from bolus_addon.core.unfold.unfold import unfold_patch
 
     t0 = time.perf_counter()
     u = unfold_patch(np.asarray(p["V"], dtype=np.float64), np.asarray(p["F"], dtype=np.int64))

@@ -10,7 +10,7 @@ Run from the repository root (no Blender needed: core only):
 Meshes (none of them is in the auto-encoder's training set, whose 30 meshes are listed in
 ``assets/print_sae.npz``'s meta; the run checks this and says so):
 
-* ``airplane.obj`` and ``fish.obj`` (``../shared/meshes``, normalised units): scaled so their
+* ``airplane.obj`` and ``fish.obj`` (``tests/data``, normalised units): scaled so their
   longest side is 150 mm, as ``print_bench.py`` does;
 * ``makehuman_body.obj`` (dm), the "toy": a closed doll-like figure standing in for the seed's
   teddy / four-legged toy of the Princeton benchmark (not redistributable); longest side 150 mm;
@@ -51,24 +51,24 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchutil import ROOT, SHARED_MESHES, Table, error_row, finish, parser, run_line, versions  # noqa: E402
+from benchutil import ROOT, data_mesh, Table, error_row, finish, parser, run_line, versions  # noqa: E402
 
-from bolus_addon.core.autoencoder import reconstruction_error, train_stacked  # noqa: E402
-from bolus_addon.core.learned_segmentation import default_sae_path, learned_segmentation, load_default_sae  # noqa: E402
-from bolus_addon.core.objfile import load_obj  # noqa: E402
-from bolus_addon.core.print_orientation import orient  # noqa: E402
-from bolus_addon.core.print_parts import orient_print_parts  # noqa: E402
-from bolus_addon.core.print_segmentation import print_segmentation  # noqa: E402
-from bolus_addon.core.topology import MeshTopology  # noqa: E402
+from bolus_addon.core.printing.autoencoder import reconstruction_error, train_stacked  # noqa: E402
+from bolus_addon.core.printing.learned import default_sae_path, learned_segmentation, load_default_sae  # noqa: E402
+from bolus_addon.core.mesh.objfile import load_obj  # noqa: E402
+from bolus_addon.core.printing.orientation import orient  # noqa: E402
+from bolus_addon.core.printing.parts import orient_print_parts  # noqa: E402
+from bolus_addon.core.printing.segmentation import print_segmentation  # noqa: E402
+from bolus_addon.core.mesh.topology import MeshTopology  # noqa: E402
 
 SEED = 0
 TRAIN_ROWS = 3000  # the seed's 3,000 sub-graphs (scripts/train_print_sae.py ROWS)
 
 #: (name, path, how to get mm: ("factor", f) or ("longest", mm), note)
 MESHES = [
-    ("airplane", SHARED_MESHES / "airplane.obj", ("longest", 150.0), "normalised -> longest side 150 mm"),
-    ("fish", SHARED_MESHES / "fish.obj", ("longest", 150.0), "normalised -> longest side 150 mm"),
-    ("toy (makehuman_body)", SHARED_MESHES / "makehuman_body.obj", ("longest", 150.0),
+    ("airplane", data_mesh("airplane.obj"), ("longest", 150.0), "normalised -> longest side 150 mm"),
+    ("fish", data_mesh("fish.obj"), ("longest", 150.0), "normalised -> longest side 150 mm"),
+    ("toy (makehuman_body)", data_mesh("makehuman_body.obj"), ("longest", 150.0),
      "dm -> longest side 150 mm; a closed doll-like figure for the seed's teddy / four-legged toy"),
     ("face (ict_face_narrow)", ROOT / "assets" / "ict_face_narrow.obj", ("factor", 10.0),
      "cm -> mm (x 10), true size; open surface"),

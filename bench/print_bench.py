@@ -27,7 +27,7 @@ Also printed: the angle between the two directions, the sum of the parts' suppor
 volumes against the whole model's (each at ours' direction), and the largest/smallest
 part area for ABcut and RatioCut (same weights, seed, parts and crumb merging).
 
-Units (see ../shared/meshes/README.md): the ICT face is in cm (x 10 -> mm); airplane
+Units (see tests/data/README.md): the ICT face is in cm (x 10 -> mm); airplane
 and fish are in normalised units and are scaled so their longest side is 150 mm (a
 desktop-printer sized model; WQ grows with size^2, WU with size^3).
 """
@@ -41,12 +41,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchutil import ROOT, SHARED_MESHES, Table, error_row, finish, parser, run_line, versions  # noqa: E402
+from benchutil import ROOT, data_mesh, Table, error_row, finish, parser, run_line, versions  # noqa: E402
 
-from bolus_addon.core.objfile import load_obj  # noqa: E402
-from bolus_addon.core.print_orientation import orient  # noqa: E402
-from bolus_addon.core.print_segmentation import area_balance, print_segment  # noqa: E402
-from bolus_addon.core.topology import MeshTopology, submesh  # noqa: E402
+from bolus_addon.core.mesh.objfile import load_obj  # noqa: E402
+from bolus_addon.core.printing.orientation import orient  # noqa: E402
+from bolus_addon.core.printing.segmentation import area_balance, print_segment  # noqa: E402
+from bolus_addon.core.mesh.topology import MeshTopology, submesh  # noqa: E402
 
 SEED = 0
 H_LAYER = 0.2  # SPEC: layer height, mm
@@ -62,8 +62,8 @@ REF_BLOCK = 4_000_000  # floats per (faces or vertices) x directions block
 #: (name, path, how to get mm: ("factor", f) or ("longest", mm), note)
 MESHES = [
     ("ict_face_narrow", ROOT / "assets" / "ict_face_narrow.obj", ("factor", 10.0), "cm -> mm (x 10)"),
-    ("fish", SHARED_MESHES / "fish.obj", ("longest", 150.0), "normalised -> longest side 150 mm"),
-    ("airplane", SHARED_MESHES / "airplane.obj", ("longest", 150.0), "normalised -> longest side 150 mm"),
+    ("fish", data_mesh("fish.obj"), ("longest", 150.0), "normalised -> longest side 150 mm"),
+    ("airplane", data_mesh("airplane.obj"), ("longest", 150.0), "normalised -> longest side 150 mm"),
 ]
 QUICK = {"ict_face_narrow"}
 

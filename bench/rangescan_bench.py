@@ -8,7 +8,7 @@ Run from the repository root (bpy in .venv):
     .venv/bin/python bench/rangescan_bench.py --ops unfold make_shell --scenarios whole
     .venv/bin/python bench/rangescan_bench.py --markdown docs/benchmarks.md   # replace its own section
 
-The scan (built here, deterministic; ``../shared/meshes`` has no range scan): ``nefertiti.obj``
+The scan (built here, deterministic; the repository has no range scan): ``nefertiti.obj``
 (a closed 70k-triangle bust in mm) subdivided twice at the edge midpoints (1,120,000 triangles,
 the surface unchanged); the front as a scanner sees it (the triangles whose centroid is in front
 of a z plane, z = the nose's direction); scan gaps: bands ``GAP_MM`` wide around random planes
@@ -53,7 +53,7 @@ import time
 from pathlib import Path
 
 import benchutil
-from benchutil import SHARED_MESHES, Table
+from benchutil import data_mesh, Table
 
 SEED = 14
 PIECES, FRAGMENTS = 17, 3
@@ -158,11 +158,11 @@ def range_scan(seed: int = SEED, target_faces: int = TARGET_FACES, pieces: int =
     target / 4)."""
     import numpy as np
 
-    from bolus_addon.core.objfile import load_obj
+    from bolus_addon.core.mesh.objfile import load_obj
     from unfold_bench import midpoint_subdivide, submesh
 
     rng = np.random.default_rng(seed)
-    V, F, _ = load_obj(SHARED_MESHES / "nefertiti.obj", 1.0)
+    V, F, _ = load_obj(data_mesh("nefertiti.obj"), 1.0)
     for _ in range(subdivisions):
         V, F = midpoint_subdivide(V, F)
     # the front as the scanner sees it: a little more than the target, the gaps take the rest
@@ -258,14 +258,14 @@ def cached_head(subdivisions: int = 2) -> tuple[Path, dict]:
     .npz (V, F) in the scan's cache folder, and its info."""
     import numpy as np
 
-    from bolus_addon.core.objfile import load_obj
+    from bolus_addon.core.mesh.objfile import load_obj
     from unfold_bench import midpoint_subdivide
 
     cache = Path(os.environ.get("BOLUS_RANGESCAN_CACHE", Path(tempfile.gettempdir()) / "bolus_rangescan"))
     cache.mkdir(parents=True, exist_ok=True)
     path = cache / f"head_d{subdivisions}.npz"
     if not path.exists():
-        V, F, _ = load_obj(SHARED_MESHES / "nefertiti.obj", 1.0)
+        V, F, _ = load_obj(data_mesh("nefertiti.obj"), 1.0)
         for _ in range(subdivisions):
             V, F = midpoint_subdivide(V, F)
         np.savez(path, V=V, F=F)
@@ -302,7 +302,7 @@ def _mm_scene(bpy):
 def _load_scan(bpy, path):
     import numpy as np
 
-    from bolus_addon import mesh_io
+    from bolus_addon.blender import mesh_io
 
     d = np.load(path)
     V, F = d["V"], d["F"]
@@ -316,7 +316,7 @@ def _load_scan(bpy, path):
 
 
 def _write_labels(ob, name, labels):
-    from bolus_addon import mesh_io
+    from bolus_addon.blender import mesh_io
 
     mesh_io.write_attribute(ob.data, name, "INT", "FACE", labels)
     ob.data.update()

@@ -8,7 +8,7 @@ Run from the repository root (Blender renders the query photos: bpy from .venv):
     .venv/bin/python bench/retrieval_bench.py --markdown docs/benchmarks.md   # append the tables (make bench)
 
 The library (a folder of ``.obj`` files, as the add-on's library is a folder of .blend/.stl/.obj):
-every mesh of ``../shared/meshes`` (``fish_open.obj`` left out: the same fish as ``fish.obj``) is a
+every mesh of ``assets/`` and ``tests/data/`` is a
 class, scaled to mm as that folder's README says, with three members:
 
 * ``original``: the mesh as read (centred on its bounding box);
@@ -62,7 +62,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from benchutil import (  # noqa: E402
     ROOT,
-    SHARED_MESHES,
+    data_mesh,
     Table,
     captured_output,
     error_row,
@@ -73,8 +73,8 @@ from benchutil import (  # noqa: E402
 )
 
 from bolus_addon.core.errors import BolusError  # noqa: E402
-from bolus_addon.core.objfile import load_obj  # noqa: E402
-from bolus_addon.core.retrieval_metrics import query_scores, summarise  # noqa: E402
+from bolus_addon.core.mesh.objfile import load_obj  # noqa: E402
+from bolus_addon.core.retrieval.metrics import query_scores, summarise  # noqa: E402
 
 SEED = 0
 SEED_NAME, HU_NAME = "SEED", "HU"
@@ -123,9 +123,8 @@ def _axis(text: str) -> np.ndarray:
 
 
 def mesh_path(name: str) -> Path:
-    """A mesh from assets/ (copied with its licence), else ../shared/meshes (as the tests' shared_mesh)."""
-    p = ROOT / "assets" / name
-    return p if p.exists() else SHARED_MESHES / name
+    """A mesh of the repository (assets/, then tests/data/)."""
+    return data_mesh(name)
 
 
 def load_class(file: str, scale) -> tuple[np.ndarray, np.ndarray]:
@@ -485,7 +484,7 @@ def make_queries(renders: list[dict], conditions=CONDITIONS, rng=SEED) -> list[d
 def retrieval_api():
     """core.retrieval's model_descriptor, photo_descriptor, rank (BolusError naming what is missing)."""
     try:
-        from bolus_addon.core import retrieval  # noqa: PLC0415
+        from bolus_addon.core.retrieval import library as retrieval  # noqa: PLC0415
     except ImportError as exc:
         raise BolusError(f"core.retrieval cannot be imported: {exc}") from None
     missing = [n for n in ("model_descriptor", "photo_descriptor", "rank") if not hasattr(retrieval, n)]

@@ -7,7 +7,7 @@ Run from the repository root (no Blender needed: core only):
     .venv/bin/python bench/scale_bench.py --steps preview segment --sizes 1M
     .venv/bin/python bench/scale_bench.py --markdown docs/benchmarks.md   # replace its own section
 
-Meshes (``nefertiti.obj``, a closed 70k-triangle bust scan in mm, from ``../shared/meshes``;
+Meshes (``nefertiti.obj``, a closed 70k-triangle bust scan in mm, from ``tests/data``;
 midpoint 1->4 subdivision does not move the surface):
 
 * ``10k``: the 70k mesh, the edge-connected crop of about 10,000 triangles nearest the nose tip
@@ -49,7 +49,7 @@ import time
 from pathlib import Path
 
 import benchutil
-from benchutil import SHARED_MESHES, Table
+from benchutil import data_mesh, Table
 
 SIZES = {"10k": (0, 10_000), "100k": (1, 100_000), "1M": (2, None)}  # (times subdivided, crop to n faces)
 QUICK_SIZES = ("10k", "100k")
@@ -89,10 +89,10 @@ def build_inputs(sizes, steps, folder: Path) -> dict:
     """Write the input .npz of every (step, size) to folder -> {(step, size): (path, faces, how)}."""
     import numpy as np
 
-    from bolus_addon.core.objfile import load_obj
+    from bolus_addon.core.mesh.objfile import load_obj
     from unfold_bench import midpoint_subdivide, region_around
 
-    V0, F0, _ = load_obj(SHARED_MESHES / "nefertiti.obj", 1.0)
+    V0, F0, _ = load_obj(data_mesh("nefertiti.obj"), 1.0)
     centre_body = V0.mean(axis=0)
     tip = V0[int(np.argmax(V0[:, 2]))]
     levels = {0: (V0, F0)}
@@ -144,7 +144,11 @@ def worker(step: str, path: str) -> dict:
 
     import numpy as np
 
-    from bolus_addon.core import cutlines, print_orientation, saliency, shell, spectral, unfold
+    from bolus_addon.core.cuts import cutlines
+    from bolus_addon.core.printing import orientation as print_orientation
+    from bolus_addon.core.analysis import saliency, spectral
+    from bolus_addon.core.solid import shell
+    from bolus_addon.core.unfold import unfold
 
     d = np.load(path)
     V, F = d["V"], d["F"]

@@ -22,7 +22,7 @@ For every mesh, in the same process and on the same object:
   seed, patches and smoothing: the largest per-patch sum varpi from the object's
   ``bolus_patch_table`` custom property, the sum over patches and the patch count.
 
-Meshes come from ``<repo>/../shared/meshes`` (override with BOLUS_SHARED_MESHES);
+Meshes come from the repository's ``assets/`` and ``tests/data/``;
 see its README for sources, licences and units.
 """
 from __future__ import annotations
@@ -37,7 +37,7 @@ import tracemalloc
 from pathlib import Path
 
 import benchutil
-from benchutil import SHARED_MESHES, Table, captured_output, clean_scene, current_rss_kb, import_mesh, maxrss_kb, \
+from benchutil import data_mesh, Table, captured_output, clean_scene, current_rss_kb, import_mesh, maxrss_kb, \
     reset_peak_rss, timed_uv_operator
 
 PATCHES = 4
@@ -177,7 +177,7 @@ def patch_summary(table: dict) -> dict:
 
 
 def bench_mesh(bpy, fname: str, scale_length: float, note: str, repeat: int, verbose: bool) -> dict:
-    path = SHARED_MESHES / fname
+    path = data_mesh(fname)
     name = Path(fname).stem
     clean_scene(bpy)
     ob = import_mesh(bpy, path, scale_length)
@@ -313,16 +313,12 @@ def main(argv=None) -> int:
     print(f"Bolus segment benchmark: bpy {bpy.app.version_string}, Python {platform.python_version()}, "
           f"numpy {np.__version__}, scipy {scipy.__version__}, scikit-learn {sklearn.__version__}, "
           f"{os.cpu_count()} CPUs")
-    print(f"meshes from {SHARED_MESHES}; each operator timed {repeat}x, best kept")
+    print(f"meshes from assets/ and tests/data/; each operator timed {repeat}x, best kept")
     rows = []
     t_start = time.perf_counter()
     try:
         for fname, scale_length, note in meshes:
-            path = SHARED_MESHES / fname
-            if not path.exists():
-                print(f"\n== {fname}: not found at {path}, skipped")
-                rows.append({"mesh": Path(fname).stem, "error": f"{path} not found"})
-                continue
+            path = data_mesh(fname)
             try:
                 rows.append(bench_mesh(bpy, fname, scale_length, note, repeat, args.verbose))
             except Exception as exc:  # a benchmark reports, it does not stop at the first failure

@@ -63,7 +63,7 @@ against the shell's, and the total support volume (SPEC) of the parts, each in i
 orientation (``print_orientation.orient``), against the whole shell's in its own best
 orientation.
 
-Meshes come from ``<repo>/../shared/meshes`` (override with BOLUS_SHARED_MESHES).
+Meshes come from the repository's ``assets/`` and ``tests/data/``.
 """
 from __future__ import annotations
 
@@ -79,7 +79,7 @@ import time
 from pathlib import Path
 
 import benchutil
-from benchutil import ROOT, SHARED_MESHES, Table
+from benchutil import ROOT, data_mesh, Table
 from unfold_bench import midpoint_subdivide, region_around, submesh
 
 THICKNESS_MM = 10.0
@@ -122,7 +122,7 @@ def outward(V, F, inside):
     """(F, flipped): the triangles wound so that their area-weighted mean normal points away from ``inside`` (3,)."""
     import numpy as np
 
-    from bolus_addon.core.topology import MeshTopology
+    from bolus_addon.core.mesh.topology import MeshTopology
 
     t = MeshTopology(V, F)
     n = (t.face_normals * t.areas[:, None]).sum(axis=0)
@@ -135,8 +135,8 @@ def example_region() -> dict:
     """The example nose region (module doc): V, F (mm) and how it was made."""
     import numpy as np
 
-    from bolus_addon.core.objfile import load_obj
-    from bolus_addon.core.treatment_area import treatment_area
+    from bolus_addon.core.mesh.objfile import load_obj
+    from bolus_addon.core.cuts.treatment_area import treatment_area
 
     V, F, _ = load_obj(ROOT / "assets" / "ict_face_narrow.obj", 10.0)
     tip = V[int(np.argmax(V[:, 2]))]
@@ -153,11 +153,9 @@ def face_region(name: str, fname: str, scale: float, unit_note: str) -> dict:
     """A face crop of a bust (module doc): sphere of FACE_RADIUS_MM around the nose tip, connected, subdivided."""
     import numpy as np
 
-    from bolus_addon.core.objfile import load_obj
+    from bolus_addon.core.mesh.objfile import load_obj
 
-    path = SHARED_MESHES / fname
-    if not path.exists():
-        raise FileNotFoundError(f"{path} not found")
+    path = data_mesh(fname)
     V, F, _ = load_obj(path, scale)
     tip = V[int(np.argmax(V[:, 2]))]
     Vr, Fr = region_around(V, F, tip, FACE_RADIUS_MM)
@@ -173,9 +171,9 @@ def face_region(name: str, fname: str, scale: float, unit_note: str) -> dict:
 
 def demosthenes_scale() -> float:
     """mm per normalised unit of demosthenes.obj: the head from DEMOSTHENES_CHIN_Y to the crown is HEAD_MM."""
-    from bolus_addon.core.objfile import load_obj
+    from bolus_addon.core.mesh.objfile import load_obj
 
-    V, _, _ = load_obj(SHARED_MESHES / "demosthenes.obj", 1.0)
+    V, _, _ = load_obj(data_mesh("demosthenes.obj"), 1.0)
     return HEAD_MM / (float(V[:, 1].max()) - DEMOSTHENES_CHIN_Y)
 
 
@@ -199,7 +197,7 @@ def border_distance(V, F):
     import numpy as np
     from scipy.spatial import cKDTree
 
-    from bolus_addon.core.cutting import boundary_loops
+    from bolus_addon.core.mesh.boundary import boundary_loops
 
     loops = boundary_loops(F)
     if not loops:
@@ -229,7 +227,7 @@ def ray_thickness(skin_V, skin_F, outer_V, outer_F, thickness: float, walls_F=No
     from mathutils import Vector
     from mathutils.bvhtree import BVHTree
 
-    from bolus_addon.core.topology import MeshTopology
+    from bolus_addon.core.mesh.topology import MeshTopology
 
     N = MeshTopology(skin_V, skin_F).vertex_normals
     far = (border_distance(skin_V, skin_F) > thickness) & (np.linalg.norm(N, axis=1) > 0)
@@ -287,7 +285,7 @@ def folded_mask(V, F, src, skin_V, skin_F):
     index into skin_F): n . n_source <= 0 (a collapsed triangle counts as folded)."""
     import numpy as np
 
-    from bolus_addon.core.topology import face_normals
+    from bolus_addon.core.mesh.topology import face_normals
 
     n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
     return np.einsum("ij,ij->i", n, face_normals(skin_V, skin_F)[src]) <= 0
@@ -301,7 +299,7 @@ def folded_triangles(V, F, src, skin_V, skin_F) -> int:
 def measure_solid(V, F, outer, walls, skin_V, skin_F, thickness: float) -> dict:
     """The figures of one solid (V, F) with its outer faces and its rim / hole walls (masks (m,) bool) on the skin
     (skin_V, skin_F)."""
-    from bolus_addon.core.solid import closed_report
+    from bolus_addon.core.solid.manifold import closed_report
 
     rep = closed_report(V, F)
     t = ray_thickness(skin_V, skin_F, V, F[outer], thickness, F[walls])
@@ -363,7 +361,7 @@ def solidify_arrays(bpy, V, F, mode: str, thickness: float = THICKNESS_MM, timer
     m2.attributes["bolus_bench_src"].data.foreach_get("value", src)
     if np_ == len(F):
         raise RuntimeError("the Solidify modifier was not evaluated (as many faces out as in)")
-    from bolus_addon.core.topology import triangulate_polygons
+    from bolus_addon.core.mesh.topology import triangulate_polygons
 
     V2 = co.reshape(-1, 3)
     F2, tri_poly = triangulate_polygons(corners, sizes)
@@ -417,7 +415,7 @@ def measured(fn):
 
 
 def work_ours(data: dict, job: dict) -> tuple[dict, dict]:
-    from bolus_addon.core.shell import make_shell
+    from bolus_addon.core.solid.shell import make_shell
 
     V, F = data["V"], data["F"]
     sh, st = measured(lambda: make_shell(V, F, thickness=job["thickness"], resolution=job["resolution"]))
@@ -441,10 +439,10 @@ def work_parts(data: dict, job: dict) -> tuple[dict, dict]:
     """Segment the skin, split the shell, orient the shell and each part (module doc)."""
     import numpy as np
 
-    from bolus_addon.core.print_orientation import orient
-    from bolus_addon.core.print_parts import orient_print_parts
-    from bolus_addon.core.print_segmentation import print_segment
-    from bolus_addon.core.solid_parts import split_solid
+    from bolus_addon.core.printing.orientation import orient
+    from bolus_addon.core.printing.parts import orient_print_parts
+    from bolus_addon.core.printing.segmentation import print_segment
+    from bolus_addon.core.solid.parts import split_solid
 
     V, F, side, sV, sF = data["V"], data["F"], data["side"], data["skin_V"], data["skin_F"]
     labels, st_seg = measured(lambda: print_segment(sV, sF, parts=job["parts"], method="abcut", rng=0))
@@ -526,7 +524,7 @@ def bench_region(region: dict, resolutions, tmp: Path, keep: bool = False, parts
     (when it was run, else the finest) (module doc).  The child processes' arrays stay in ``tmp`` when ``keep``."""
     import numpy as np
 
-    from bolus_addon.core.solid import SIDE_OUTER, SIDE_RIM
+    from bolus_addon.core.solid.manifold import SIDE_OUTER, SIDE_RIM
 
     name, V, F = region["name"], region["V"], region["F"]
     t = THICKNESS_MM
@@ -584,8 +582,8 @@ def parts_figures(out: dict, shell: dict) -> dict:
     """Closed? and volume of every part (core.solid.closed_report on its faces), their sum against the shell's."""
     import numpy as np
 
-    from bolus_addon.core.solid import closed_report
-    from bolus_addon.core.topology import submesh
+    from bolus_addon.core.solid.manifold import closed_report
+    from bolus_addon.core.mesh.topology import submesh
 
     closed, vols = [], []
     for p in np.unique(out["labels"]):

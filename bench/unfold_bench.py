@@ -68,7 +68,7 @@ within 150 mm of the nose tip, the vertex of largest z, connected to it, midpoin
 subdivided once: ~43k triangles) and the closed toy ``fish closed`` (fish.obj scaled
 to 150 mm, unfolded whole: it gets cut to a disk).  ``--quick`` leaves out the two
 big ones and the explicit integrator.
-Meshes come from ``<repo>/../shared/meshes`` (override with BOLUS_SHARED_MESHES).
+Meshes come from the repository's ``assets/`` and ``tests/data/``.
 
 Hard patches: darts and splits (issue 12; ``--hard-only`` runs this section alone, ``--no-hard``
 leaves it out): the patches of ``bench/hard_patches.py`` (nose disks of four heads cut into 3
@@ -93,7 +93,7 @@ import sys
 import time
 
 import benchutil
-from benchutil import SHARED_MESHES, Table, captured_output, clean_scene, pct, timed_uv_operator
+from benchutil import data_mesh, Table, captured_output, clean_scene, pct, timed_uv_operator
 
 CAP_R = 100.0
 CAP_SUBDIV = 6
@@ -124,7 +124,7 @@ BLENDER_RUNS = (("ANGLE_BASED", "ANGLE_BASED", None), ("CONFORMAL", "CONFORMAL",
 
 def submesh(V, F, sel):
     """(V (k,3), F (j,3)): the triangles F[sel] with their vertices renumbered (`topology.submesh`)."""
-    from bolus_addon.core.topology import submesh as topo_submesh
+    from bolus_addon.core.mesh.topology import submesh as topo_submesh
 
     Fs, ids = topo_submesh(F, sel)
     return V[ids], Fs
@@ -134,8 +134,8 @@ def measure(V, F, UV) -> dict:
     """EL, EA (fractions), flipped and overlapping triangles of UV against V, as SPEC measures them."""
     import numpy as np
 
-    from bolus_addon.core.overlap import overlapping_faces, signed_areas
-    from bolus_addon.core.measures import length_area_errors
+    from bolus_addon.core.unfold.overlap import overlapping_faces, signed_areas
+    from bolus_addon.core.unfold.measures import length_area_errors
 
     EL, EA = length_area_errors(V, F, UV)
     A = signed_areas(UV, F)
@@ -176,7 +176,7 @@ def segmented_patches(V, F, k: int, name: str, source: str, indent: str = "") ->
     """Segment (V, F) into k patches with the add-on's core and return one benchmark patch each."""
     import numpy as np
 
-    from bolus_addon.core import spectral
+    from bolus_addon.core.analysis import spectral
 
     labels = spectral.segment(V, F, k, smoothing_mm=SEG_SMOOTHING_MM, rng=SEG_RNG).face_labels
     ids = np.unique(labels)
@@ -194,9 +194,9 @@ def make_patches(quick: bool) -> list[dict]:
     import numpy as np
 
     import meshgen
-    from bolus_addon.core import spectral
-    from bolus_addon.core.objfile import load_obj
-    from bolus_addon.core.topology import MeshTopology
+    from bolus_addon.core.analysis import spectral
+    from bolus_addon.core.mesh.objfile import load_obj
+    from bolus_addon.core.mesh.topology import MeshTopology
 
     sub = CAP_SUBDIV_QUICK if quick else CAP_SUBDIV
     out = []
@@ -209,9 +209,7 @@ def make_patches(quick: bool) -> list[dict]:
                 "source": f"meshgen.height_field(z = (x^2 - y^2)/300, {SADDLE_N}, {SADDLE_N}, {SADDLE_SIZE:g} mm)"})
 
     def load(fname, scale):
-        path = SHARED_MESHES / fname
-        if not path.exists():
-            raise FileNotFoundError(f"{path} not found")
+        path = data_mesh(fname)
         return load_obj(path, scale)
 
     # nose region of the ICT face (cm -> mm)
@@ -307,7 +305,7 @@ def region_around(V, F, centre, radius_mm: float):
     """The triangles with every corner within radius_mm of centre, edge-connected to the one nearest it."""
     import numpy as np
 
-    from bolus_addon.core.topology import MeshTopology
+    from bolus_addon.core.mesh.topology import MeshTopology
 
     d = np.linalg.norm(V - centre, axis=1)
     Vn, Fn = submesh(V, F, (d[F] <= radius_mm).all(axis=1))
@@ -338,7 +336,7 @@ def midpoint_subdivide(V, F):
 @contextlib.contextmanager
 def recording_explicit(log: dict):
     """Record the iterations and time of `unfold.relax_explicit` inside `unfold_patch` (read only)."""
-    from bolus_addon.core import unfold
+    from bolus_addon.core.unfold import unfold
 
     orig = unfold.relax_explicit
 
@@ -360,8 +358,8 @@ def explicit_cap(cut, budget_s: float) -> tuple[int, float]:
     """max_iter for the explicit integrator: min(default, budget / estimated step time); also the step estimate."""
     import numpy as np
 
-    from bolus_addon.core.topology import MeshTopology
-    from bolus_addon.core.springs import build_springs, spring_energy
+    from bolus_addon.core.mesh.topology import MeshTopology
+    from bolus_addon.core.unfold.springs import build_springs, spring_energy
 
     topo = MeshTopology(cut.V, cut.F)
     springs = build_springs(topo)
@@ -411,7 +409,7 @@ def ablation_missing() -> list[str]:
     """The stage switches `unfold_patch` does not have (empty when the ablation can run)."""
     import inspect
 
-    from bolus_addon.core.unfold import unfold_patch
+    from bolus_addon.core.unfold.unfold import unfold_patch
 
     params = inspect.signature(unfold_patch).parameters
     return [k for k in ABLATION_SWITCHES if k not in params]
@@ -420,7 +418,7 @@ def ablation_missing() -> list[str]:
 def run_ours(V, F, cut, kind: str, repeat: int, budget_s: float) -> dict:
     import numpy as np
 
-    from bolus_addon.core.unfold import unfold_patch
+    from bolus_addon.core.unfold.unfold import unfold_patch
 
     label, kwargs = OURS_RUNS[kind]
     kwargs = dict(kwargs)
@@ -518,7 +516,7 @@ def true_scale(V, F, UV):
     """Mirror if the signed total is negative, scale uniformly to sum |A| = sum A0; returns (UV, scale, mirrored)."""
     import numpy as np
 
-    from bolus_addon.core.overlap import signed_areas
+    from bolus_addon.core.unfold.overlap import signed_areas
 
     A = signed_areas(UV, F)
     UV = UV.copy()
@@ -534,7 +532,7 @@ def run_blender(bpy, ob, cut, method: str, repeat: int, iterations: int | None =
                 label: str | None = None) -> dict:
     row = {"method": f"blender {label or method}"}
     kw = {} if iterations is None else {"iterations": iterations}
-    from bolus_addon import compat
+    from bolus_addon.blender import compat
 
     if not compat.has_uv_unwrap_method(method):  # MINIMUM_STRETCH: Blender 4.3+
         row["na"] = f"n/a (Blender {bpy.app.version_string} has no uv.unwrap {method})"
@@ -550,7 +548,7 @@ def run_blender(bpy, ob, cut, method: str, repeat: int, iterations: int | None =
     row.update(measure(Vm, Fm, UV))
     # the same UVs at the scale that is best for EL (SLIM at its best; flips and overlaps do not change)
     s_opt = el_optimal_scale(Vm, Fm, UV)
-    from bolus_addon.core.measures import length_area_errors
+    from bolus_addon.core.unfold.measures import length_area_errors
 
     el, ea = length_area_errors(Vm, Fm, s_opt * UV)
     row["el_optimal"] = {"scale": s_opt, "EL": el, "EA": ea}
@@ -645,7 +643,7 @@ def compare(row: dict, methods: dict) -> None:
 def bench_patch(bpy, patch: dict, args) -> dict:
     import numpy as np
 
-    from bolus_addon.core.cutting import cut_to_disk
+    from bolus_addon.core.mesh.boundary import cut_to_disk
 
     V, F = np.asarray(patch["V"], dtype=np.float64), np.asarray(patch["F"], dtype=np.int64)
     name = patch["name"]
@@ -866,7 +864,7 @@ HARD_SLIM_KEYS = ("SLIM-10", "SLIM-100")
 def sheet_pieces_function():
     """`core.sheet_pieces.sheet_pieces`, or None while the module does not exist (the bench says so)."""
     try:
-        from bolus_addon.core.sheet_pieces import sheet_pieces
+        from bolus_addon.core.unfold.sheet_pieces import sheet_pieces
     except ImportError:
         return None
     return sheet_pieces
@@ -943,7 +941,7 @@ def run_unrefined(V, F, repeat: int) -> dict:
     """Ours without refinement: `unfold_patch(V, F)` (the default), best of `repeat`, one piece."""
     import numpy as np
 
-    from bolus_addon.core.unfold import unfold_patch
+    from bolus_addon.core.unfold.unfold import unfold_patch
 
     times = []
     for _ in range(repeat):
@@ -981,7 +979,7 @@ def slim_rows(patches: list[dict], repeat: int = 3) -> list[dict]:
     import bpy
     import numpy as np
 
-    from bolus_addon.core.cutting import cut_to_disk
+    from bolus_addon.core.mesh.boundary import cut_to_disk
 
     with captured_output():
         clean_scene(bpy)
@@ -1003,7 +1001,7 @@ def bench_hard_patch(bpy, patch: dict, args, fn) -> dict:
     """One hard patch: ours without and with refinement beside SLIM-10 / SLIM-100 on the same cut disk."""
     import numpy as np
 
-    from bolus_addon.core.cutting import cut_to_disk
+    from bolus_addon.core.mesh.boundary import cut_to_disk
 
     V, F = np.asarray(patch["V"], dtype=np.float64), np.asarray(patch["F"], dtype=np.int64)
     cut = cut_to_disk(V, F)
@@ -1265,9 +1263,9 @@ def print_hard(rows: list[dict], args) -> None:
 def warm_up(bpy) -> None:
     """One small unfold and unwrap of each kind, so no timed call pays for imports or first-use set-up."""
     import meshgen
-    from bolus_addon import compat
-    from bolus_addon.core.cutting import cut_to_disk
-    from bolus_addon.core.unfold import unfold_patch
+    from bolus_addon.blender import compat
+    from bolus_addon.core.mesh.boundary import cut_to_disk
+    from bolus_addon.core.unfold.unfold import unfold_patch
 
     V, F = meshgen.height_field(lambda x, y: (x * x - y * y) / 300.0, 8, 8, 50.0)
     for kw in ({"method": "lbfgs"}, {"method": "explicit", "refine_rounds": 0, "max_iter": 200}):
@@ -1332,7 +1330,7 @@ def main(argv=None) -> int:
     print(f"Bolus unfold benchmark: bpy {bpy.app.version_string}, Python {platform.python_version()}, "
           f"numpy {np.__version__}, scipy {scipy.__version__}, {os.cpu_count()} CPUs"
           f"{'  [--quick]' if args.quick else ''}")
-    print(f"meshes from {SHARED_MESHES}; our runs and Blender methods best of {args.repeat}; explicit once, "
+    print(f"meshes from assets/ and tests/data/; our runs and Blender methods best of {args.repeat}; explicit once, "
           f"max_iter = min({EXPLICIT_DEFAULT_MAX_ITER}, {args.explicit_budget:g} s / estimated step)")
     rna = bpy.ops.uv.unwrap.get_rna_type()
     defaults = {p.identifier: getattr(p, "default", None) for p in rna.properties

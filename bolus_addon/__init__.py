@@ -11,10 +11,14 @@ _classes = ()
 def register():
     import bpy
 
-    from . import analysis_ops, area_ops, cut_ops, improve_ops, operators, panel, pattern_export_ops, pattern_ops, print_ops, properties, retrieval_ops, shell_ops
+    from . import panel
+    from .blender import operator_base, properties
+    from .operators import analysis, area, cuts, improve, pattern, printing, retrieval, solid, unfold
 
     global _classes
-    _classes = (properties.BolusSettings, *operators.classes, *area_ops.classes, *analysis_ops.classes, *cut_ops.classes, *improve_ops.classes, *pattern_ops.classes, *pattern_export_ops.classes, *print_ops.classes, *shell_ops.classes, *retrieval_ops.classes, *panel.classes)
+    _classes = (properties.BolusSettings, *operator_base.classes, *area.classes, *analysis.classes, *cuts.classes,
+                *improve.classes, *unfold.classes, *pattern.classes, *printing.classes, *solid.classes,
+                *retrieval.classes, *panel.classes)
     for cls in _classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.bolus = bpy.props.PointerProperty(type=properties.BolusSettings)

@@ -15,16 +15,22 @@ import textwrap
 import bpy
 import numpy as np
 
-from . import guide, mesh_io
-from .cut_ops import PROP_CUT_TABLE
-from .improve_ops import IMPROVED_SUFFIX, PROP_IMPROVE_TABLE
-from .operators import PROP_FLV, PROP_PATCH_TABLE, PROP_SUM_VARPI
-from .pattern_ops import PATTERN_SUFFIX, PROP_PATTERN_TABLE
-from .print_ops import ATTR_PRINT_PART, PROP_ORIENT_TABLE, PROP_PART_SOURCE, PROP_PRINT_TABLE, part_objects
-from .shell_ops import (PROP_MASS, PROP_THICKNESS_MAX, PROP_THICKNESS_MEAN, PROP_THICKNESS_MIN,
-                        PROP_VOLUME, is_bolus_object)
-from .retrieval_ops import PROP_LIBRARY, PROP_RETRIEVAL
-from .solid_print_ops import PROP_CONNECTORS
+from .blender import guide, mesh_io
+from .operators.cuts import PROP_CUT_TABLE
+from .operators.improve import IMPROVED_SUFFIX, PROP_IMPROVE_TABLE
+from .blender.operator_base import PROP_FLV, PROP_PATCH_TABLE, PROP_SUM_VARPI
+from .operators.unfold import PATTERN_SUFFIX, PROP_PATTERN_TABLE
+from .operators.printing import ATTR_PRINT_PART, PROP_ORIENT_TABLE, PROP_PART_SOURCE, PROP_PRINT_TABLE, part_objects
+from .operators.solid import (
+    PROP_MASS,
+    PROP_THICKNESS_MAX,
+    PROP_THICKNESS_MEAN,
+    PROP_THICKNESS_MIN,
+    PROP_VOLUME,
+    is_bolus_object,
+)
+from .operators.retrieval import PROP_LIBRARY, PROP_RETRIEVAL
+from .operators.solid_print import PROP_CONNECTORS
 
 #: the line every user reads (README "Intended use")
 DISCLAIMER = "A planning aid, not a medical device: check every bolus on the planning CT before treatment"

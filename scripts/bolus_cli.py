@@ -287,7 +287,7 @@ class Run:
         else the area as selected; None for the whole mesh."""
         if self.area is None:
             return None
-        from bolus_addon.mesh_io import read_face_labels
+        from bolus_addon.blender.mesh_io import read_face_labels
 
         if "bolus_patch" in obj.data.attributes:
             return read_face_labels(obj.data, "bolus_patch") >= 0
@@ -420,7 +420,7 @@ class Run:
         self.done("shell", object=self.bolus.name, **props(self.bolus))
 
     def step_print(self) -> None:
-        from bolus_addon.print_ops import part_objects
+        from bolus_addon.operators.printing import part_objects
 
         a = self.args
         self.activate(self.bolus, region=False)
@@ -457,7 +457,7 @@ class Run:
                 self.output(self.out / "pattern.png")
             bolus = getattr(self, "bolus", None)
             if "print" in self.report["steps_done"]:
-                from bolus_addon.print_ops import part_objects
+                from bolus_addon.operators.printing import part_objects
 
                 hide = [ob for ob in bpy.context.scene.objects if ob.type == "MESH"
                         and ob not in part_objects(bolus.name)]

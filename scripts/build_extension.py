@@ -133,7 +133,7 @@ r = bpy.ops.extensions.package_install_files(filepath=ZIP, repo="user_default", 
 out["install"] = sorted(r)
 out["enabled"] = "bl_ext.user_default.bolus" in bpy.context.preferences.addons
 out["scene_prop"] = hasattr(bpy.types.Scene, "bolus")
-mod = sys.modules.get("bl_ext.user_default.bolus.bolus_addon.operators")
+mod = sys.modules.get("bl_ext.user_default.bolus.bolus_addon.blender.operator_base")
 out["module_file"] = getattr(mod, "__file__", "")
 
 n = 11
@@ -186,7 +186,7 @@ if pat is not None:
     out["EL"] = L / L0
 import manifold3d  # the volume library of the printed bolus (core.solid)
 import importlib, os
-drawing = importlib.import_module("bl_ext.user_default.bolus.bolus_addon.core.pattern_export")
+drawing = importlib.import_module("bl_ext.user_default.bolus.bolus_addon.core.pattern.export")
 tri = [{"UV": np.array([[0.0, 0], [40, 0], [0, 30]]), "F": [[0, 1, 2]], "label": "check"}]
 out["export"] = {ext: drawing.write_pattern(os.path.join(USER, "check." + ext), tri, page="A4")["pages"]
                  for ext in ("svg", "dxf", "pdf")}

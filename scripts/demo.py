@@ -152,7 +152,7 @@ def setup_render(obj: bpy.types.Object, height_px: int) -> None:
 
 
 def render(obj: bpy.types.Object, color_attribute: str, path: Path) -> None:
-    from bolus_addon.mesh_io import show_colors
+    from bolus_addon.blender.mesh_io import show_colors
 
     show_colors(obj.data, color_attribute)
     bpy.context.scene.render.filepath = str(path)
@@ -161,7 +161,7 @@ def render(obj: bpy.types.Object, color_attribute: str, path: Path) -> None:
 
 def render_closeup(obj: bpy.types.Object, color_attribute: str, path: Path) -> None:
     """Front view framing the patches only (faces with bolus_patch >= 0)."""
-    from bolus_addon.mesh_io import read_face_labels
+    from bolus_addon.blender.mesh_io import read_face_labels
 
     scene = bpy.context.scene
     labels = read_face_labels(obj.data, "bolus_patch")
@@ -178,7 +178,7 @@ def render_closeup(obj: bpy.types.Object, color_attribute: str, path: Path) -> N
 
 def render_pattern(pattern: bpy.types.Object, path: Path) -> None:
     """Top view of the pattern alone, coloured by area distortion (blue shrunk, red stretched)."""
-    from bolus_addon.mesh_io import show_colors
+    from bolus_addon.blender.mesh_io import show_colors
 
     scene = bpy.context.scene
     others = [ob for ob in scene.objects if ob is not pattern and ob.type == "MESH" and not ob.hide_render]
@@ -206,7 +206,7 @@ def render_pattern(pattern: bpy.types.Object, path: Path) -> None:
 
 def render_parts(hide: list, parts: list, path: Path) -> None:
     """Front view of the oriented print parts on the plate (z = 0), overhang faces in red."""
-    from bolus_addon.mesh_io import show_colors
+    from bolus_addon.blender.mesh_io import show_colors
 
     scene = bpy.context.scene
     for ob in hide:
@@ -262,7 +262,7 @@ def render_section(face: bpy.types.Object, bolus: bpy.types.Object, path: Path, 
 def improve_and_unfold(obj: bpy.types.Object, args, out: Path) -> dict:
     """The optional step: Improve Flattenability on the patches (outward only, at most --max-gap mm),
     the air-gap map rendered, and the improved surface unfolded with the same settings as the skin."""
-    from bolus_addon.mesh_io import read_face_labels
+    from bolus_addon.blender.mesh_io import read_face_labels
 
     bpy.context.view_layer.objects.active = obj
     obj.data.polygons.foreach_set("select", read_face_labels(obj.data, "bolus_patch") >= 0)
@@ -347,8 +347,8 @@ def main():
 
     # 3D printing: the bolus itself, a closed solid of --thickness mm on the treatment area (after the
     # cuts), split into parts with pegs and holes, each turned to its best print direction, one STL each
-    from bolus_addon.mesh_io import read_face_labels
-    from bolus_addon.print_ops import part_objects
+    from bolus_addon.blender.mesh_io import read_face_labels
+    from bolus_addon.operators.printing import part_objects
 
     bpy.context.view_layer.objects.active = obj
     obj.data.polygons.foreach_set("select", read_face_labels(obj.data, "bolus_patch") >= 0)

@@ -91,7 +91,7 @@ def set_resolution(w: int, h: int) -> None:
 def show_selection(obj: bpy.types.Object, sel: np.ndarray) -> None:
     """A picture-only colour attribute: the selected faces orange, the rest grey (removed after use)."""
     from bolus_addon.core.colormap import srgb_to_linear
-    from bolus_addon.mesh_io import write_face_colors
+    from bolus_addon.blender.mesh_io import write_face_colors
 
     rgb = np.where(sel[:, None], SELECTED_SRGB, UNSELECTED_SRGB)
     write_face_colors(obj.data, "readme_selection", np.c_[srgb_to_linear(rgb), np.ones(len(sel))])
@@ -265,8 +265,8 @@ def main():
     write_png(out / "3_pattern.png", read_png(tmp / "pattern.png"))
     render_svg(svg, out / "4_pattern_svg.png")
     # 5. the printed bolus on the face, and a cross-section through the nose tip
-    from bolus_addon.mesh_io import read_face_labels
-    from bolus_addon.print_ops import part_objects
+    from bolus_addon.blender.mesh_io import read_face_labels
+    from bolus_addon.operators.printing import part_objects
 
     bpy.context.view_layer.objects.active = obj
     obj.data.polygons.foreach_set("select", read_face_labels(obj.data, "bolus_patch") >= 0)

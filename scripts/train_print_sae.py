@@ -8,7 +8,7 @@ The seed trains on 3,000 sub-graphs of 30 triangles from 30 meshes of the Prince
 Segmentation Benchmark.  The PSB is not redistributable with this project, so the training
 set here is 30 meshes anyone can rebuild:
 
-* two scans from ``../shared/meshes`` (see its README for sources and licences):
+* two scans from ``tests/data`` (see its README for sources and licences):
   ``nefertiti.obj`` (public domain) and ``demosthenes.obj`` (CC BY 4.0);
 * 28 generated shapes (`training_shapes`): spheres, tori, boxes, caps, domes on sheets,
   cylinder and cone pieces, bumpy height fields, a sheet with holes, a freeform patch, at
@@ -53,13 +53,13 @@ from meshgen import (  # noqa: E402  (tests/meshgen.py: numpy-only generated sha
     torus,
 )
 
-from bolus_addon.core.autoencoder import reconstruction_error, train_stacked  # noqa: E402
-from bolus_addon.core.objfile import load_obj  # noqa: E402
-from bolus_addon.core.print_orientation import orient  # noqa: E402
-from bolus_addon.core.subgraphs import build_subgraphs, print_features, subgraph_rows  # noqa: E402
-from bolus_addon.core.topology import MeshTopology  # noqa: E402
+from bolus_addon.core.printing.autoencoder import reconstruction_error, train_stacked  # noqa: E402
+from bolus_addon.core.mesh.objfile import load_obj  # noqa: E402
+from bolus_addon.core.printing.orientation import orient  # noqa: E402
+from bolus_addon.core.printing.subgraphs import build_subgraphs, print_features, subgraph_rows  # noqa: E402
+from bolus_addon.core.mesh.topology import MeshTopology  # noqa: E402
 
-SHARED = ROOT.parent / "shared" / "meshes"
+SCAN_DIR = ROOT / "tests" / "data"
 SCANS = ("nefertiti.obj", "demosthenes.obj")
 LONGEST_MM = 150.0
 ROWS = 3000
@@ -138,9 +138,9 @@ def training_set(rng, rows: int) -> tuple[np.ndarray, np.ndarray, list[dict]]:
     """(train (rows, 90), held back (rows/10, 90), per-mesh description)."""
     meshes = []
     for name in SCANS:
-        p = SHARED / name
+        p = SCAN_DIR / name
         if not p.exists():
-            raise SystemExit(f"{p} is missing: the training set needs ../shared/meshes beside the repository")
+            raise SystemExit(f"{p} is missing: the training set needs the repository's tests/data")
         V, F, _ = load_obj(p)
         meshes.append((name, V, F))
     meshes += training_shapes(rng)

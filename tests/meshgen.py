@@ -278,3 +278,19 @@ def freeform_patch(a=32.0, b=27.0, n_border=17, n_inner=72, bump=10.0, dip=7.0, 
     z = (bump * np.exp(-((x + 11.0) ** 2 + (y - 4.0) ** 2) / (2.0 * bump_sigma ** 2))
          - dip * np.exp(-((x - 12.0) ** 2 + (y + 5.0) ** 2) / (2.0 * dip_sigma ** 2)))
     return np.c_[P, z], F
+
+
+def cone(half_angle_deg=40.0, slant=60.0, rings=25, na=64):
+    """A cone with its apex (the last vertex) inside the patch: apex angle 80 degrees,
+    3136 triangles, all the angle deficit 2 pi (1 - sin 40 deg) = 2.24 rad at the apex."""
+    a = np.radians(half_angle_deg)
+    s = np.linspace(slant, slant / rings, rings)
+    V, F, _ = ring_surface(np.stack([s * np.sin(a), -s * np.cos(a)], 1), na=na, pole=True)
+    V[-1] = 0.0
+    return V, F
+
+
+def saddle(c=80.0, n=40):
+    """z = (x^2 - y^2) / c on a 100 mm square (3200 triangles): angle excess everywhere,
+    EL 2.9 % in one piece."""
+    return height_field(lambda x, y: (x**2 - y**2) / c, nx=n, ny=n, size=100.0)

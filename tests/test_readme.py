@@ -32,7 +32,7 @@ def text() -> str:
 def registered_operators() -> set[str]:
     """'saliency_preview', ... : every bl_idname = "bolus.X" in the Blender layer."""
     names = set()
-    for path in (ROOT / "bolus_addon").glob("*.py"):
+    for path in (ROOT / "bolus_addon").rglob("*.py"):
         names |= set(re.findall(r'bl_idname\s*=\s*"bolus\.(\w+)"', path.read_text(encoding="utf-8")))
     return names
 
@@ -85,12 +85,12 @@ def test_sidebar_names_are_the_panels(text):
     """Every button is named as the sidebar labels it, and every *name* in the steps is a
     label of the panel, a property, a button, or one of Blender's own (BLENDER_UI)."""
     ui = set()  # every string constant of the Blender layer (labels, names, table heads)
-    for path in (ROOT / "bolus_addon").glob("*.py"):
+    for path in (ROOT / "bolus_addon").rglob("*.py"):
         ui |= {n.value for n in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
                if isinstance(n, ast.Constant) and isinstance(n.value, str)}
     flat = " ".join(text.split())
     labels = set()
-    for path in (ROOT / "bolus_addon").glob("*.py"):
+    for path in (ROOT / "bolus_addon").rglob("*.py"):
         labels |= set(re.findall(r'bl_label\s*=\s*"([^"]+)"', path.read_text(encoding="utf-8")))
     assert labels and all(label in flat for label in labels), sorted(lab for lab in labels if lab not in flat)
     steps = flat[flat.index("## Step by step"):flat.index("## Scripting")]
@@ -116,7 +116,7 @@ def test_every_spec_operator_is_registered_and_what_is_not_there_yet_is_not_ther
 def test_table_arguments_are_the_operators_properties(text):
     """Every keyword of the table is declared on that operator (bpy-free: the class's annotations)."""
     declared: dict[str, set[str]] = {}
-    for path in (ROOT / "bolus_addon").glob("*.py"):
+    for path in (ROOT / "bolus_addon").rglob("*.py"):
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             if not isinstance(node, ast.ClassDef):
                 continue

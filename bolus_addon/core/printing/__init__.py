@@ -1,0 +1,1 @@
+"""Print segmentation and print directions (seed ch. 6): measures, orientation, ABcut, the learned split."""

@@ -1,0 +1,695 @@
+"""Feature skeletons of photos' contours and of models, compared by ICP (seed 5.2-5.3, eqs. 5-8..5-14).
+
+1. Feature spaces (5.2.1).  A graph with Gaussian weights W_ij = exp(-d_ij^2 / (2 sigma^2)), sigma the mean d_ij
+   over the graph's edges (eqs. 5-8, 5-10), L = D - W (eq. 3-3), and the eigenvectors of its smallest
+   eigenvalues.  The constant eigenvector (eigenvalue 0) carries nothing: it is dropped and the k = 3 following
+   ones make the feature space (the seed's "first k" is ambiguous; its figures are 3-D clouds).
+   * model vertices (`model_embedding`, eqs. 5-10, 5-11): the one-ring graph (mesh edges, `MeshTopology`).
+   * contour pixels (`image_embedding`, eqs. 5-8, 5-9): the seed's W joins every pair of pixels, with sigma the
+     mean over all pairs; we use a sparse kNN graph (symmetrised), sigma the mean of its edges, each point
+     joined to ``NEIGHBOUR_SHARE`` = 10 % of the points (at least 10), built on at most ``CONTOUR_SAMPLES`` =
+     1,500 points spread evenly by farthest-point sampling (`contour_samples`; the other points take the
+     feature coordinates of their nearest sample), so 6,000 pixels need no 6,000 x 6,000 matrix.  Why 10 %:
+     with 10 neighbours the graph is a thin ring whatever the shape, and its eigenvectors are the ring's
+     Fourier modes (every contour gives the same closed curve); joined across the silhouette's limbs the graph
+     looks like the limbs.  Silhouettes of 5 stars (3 views each) found their own model first 8 times of 15 at
+     10 % (mean rank 1.7 of 5), 2 of 15 with 10 neighbours or the seed's dense W (mean rank 3.2, 3.1); on 5 real
+     models (airplane, fish, body, two heads) 4 of 15 (mean rank 2.7; 10 neighbours 3 of 15, 3.4; chance 3 of
+     15, 3.0): a contour's skeleton and a model's are far apart in kind, and the comparison is weak.
+   Both use `spectral.gaussian_weights` (distances clipped at 3 sigma, every W_ij >= 0.011, so that one long
+   edge cannot cut the graph apart numerically).  A graph in several pieces (a model of several parts, loose
+   vertices, pixel groups) would have one zero eigenvalue per piece: `link_components` joins each piece to the
+   nearest other piece by its shortest vertex pair.  The eigenproblem: shift-invert Lanczos on one sparse LU
+   factor in a geometric `nested_dissection` order (`smallest_pairs`; dense below 300 vertices), ~2 s for 50k
+   vertices.  Eigenvector signs and, where eigenvalues repeat (symmetric shapes), the basis of an eigenspace
+   are arbitrary: the comparison (4.) tries reflections and axis permutations.  Three dimensions show at
+   most about four protrusions apart: a star with 5 arms of different lengths has its shortest arm's mode
+   in the 4th eigenvector, and that arm falls onto the centre.
+2. Skeletons (5.2.2, `skeleton`).  The embedding E (n,3) is centred and scaled to unit RMS for the steps below
+   (scale-free tolerances); the skeleton's points are rows of the embedding as given.
+   * centre vertex v0: the vertex nearest the embedding's centroid; r_i = |E_i - E_v0| (Euclidean, as the seed).
+   * GMM clusters (scikit-learn, full covariances, ``clustering.REG_COVAR``), fitted on at most ``GMM_ROWS``
+     rows drawn by ``rng``, then every row labelled.  The seed lets the user choose the number; default
+     ``DEFAULT_CLUSTERS`` = 6.  ``clusters='auto'``: the lowest BIC over ``AUTO_CLUSTERS`` (3..8) -- but on
+     these clouds (surfaces and curves, not Gaussian blobs) the BIC keeps falling as clusters are added
+     (stars, torus, sphere, ellipse contour: measured up to 12), so 'auto' nearly always takes 8.
+   * branches: a cluster holds more than one branch when its outer half (r above the middle of the cluster's
+     r range) falls into more than one graph-connected piece holding each >= ``BRANCH_SHARE`` (10 %) of it;
+     such a cluster is divided by a GMM started at the pieces' means (the seed's "divided into sets by GMM").
+   * feature points: in each set the vertex farthest from v0.  An 'end' when no graph neighbour is farther
+     from v0 (a protrusion's tip) and r >= ``END_MIN_RADIUS`` (25 %) of the largest r (bumps near the centre
+     are no protrusions); otherwise its branch continues into a neighbouring set: it goes uphill (steepest
+     ascent of r) to that branch's end and marks the end's path where it passes nearest as a 'branch' point.
+   * connection: shortest paths in the graph (edge lengths measured in the feature space) from v0 to every end
+     (one Dijkstra tree); where two paths part is a 'rendezvous'; every point is joined to the next point on
+     its path towards v0 ('centre').  Points closer than ``MERGE_RADIUS`` (2 % of the RMS radius) along the
+     tree become one (kept in the order centre > end > rendezvous > branch; two ends are never merged).
+3. `resample`: ``count`` (64) points evenly spaced by length along the skeleton's segments (the seed adds points
+   so that the two sets have similar sizes).
+4. `icp` (eqs. 5-12, 5-13): Y is moved onto X, each moved y_i paired with its closest x (Z^k, eq. 5-12) and
+   (R, T) refitted to the pairs (eq. 5-13, Kabsch), from several starting orientations at once: the 48 signed
+   permutation matrices (24 rotations and their mirror images: eigenvector signs and order are arbitrary, and
+   a mirrored shape has the same feature space), plus random rotations drawn by ``rng`` if more are asked.
+   R keeps the determinant of its start (a mirrored start stays mirrored).  The error is the RMS of eq. 5-14.
+5. `dissimilarity`: both skeletons resampled, centred at v0 and scaled to unit RMS radius about it
+   (`skeleton_samples`: photo and model sizes differ), ICP both ways, the mean of the two RMS errors
+   (symmetric).  0 for a skeleton and itself.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.sparse.linalg import LinearOperator, eigsh, splu
+from scipy.spatial import cKDTree
+from threadpoolctl import threadpool_limits
+
+from ..analysis.clustering import REG_COVAR
+from ..errors import BolusError
+from ..rng import as_rng
+from ..analysis.spectral import gaussian_weights, graph_laplacian, smallest_eigenvectors
+from ..mesh.topology import MeshTopology
+
+__all__ = [
+    "FEATURE_DIMENSIONS",
+    "DEFAULT_CLUSTERS",
+    "AUTO_CLUSTERS",
+    "Skeleton",
+    "link_components",
+    "contour_samples",
+    "contour_graph",
+    "mesh_graph",
+    "nested_dissection",
+    "smallest_pairs",
+    "spectral_embedding",
+    "image_embedding",
+    "model_embedding",
+    "skeleton",
+    "model_skeleton",
+    "image_skeleton",
+    "resample",
+    "skeleton_samples",
+    "start_rotations",
+    "icp",
+    "dissimilarity",
+]
+
+FEATURE_DIMENSIONS = 3  #: k of 5.2.1: eigenvectors after the constant one
+DEFAULT_CLUSTERS = 6  #: GMM clusters of `skeleton` (module doc)
+AUTO_CLUSTERS = (3, 4, 5, 6, 7, 8)  #: clusters='auto': the count of lowest BIC among these
+NEIGHBOUR_SHARE, MIN_NEIGHBOURS = 0.10, 10  #: contour graph: each point joined to 10 % of the points (>= 10)
+CONTOUR_SAMPLES = 1500  #: contour graphs are built on at most this many points (`contour_samples`)
+GMM_ROWS = 4000  #: the mixture is fitted on at most this many rows (drawn evenly), then labels all
+GMM_RESTARTS = 2  #: mixture restarts (best likelihood)
+BRANCH_SHARE = 0.10  #: a piece of a cluster's outer half is a branch when it holds >= 10 % of that half
+END_MIN_RADIUS = 0.25  #: an end lies at >= 25 % of the largest distance from v0
+MERGE_RADIUS = 0.02  #: skeleton points closer than 2 % of the RMS radius along the tree are one point
+SAMPLES = 64  #: points per resampled skeleton
+DENSE_MAX = 300  #: dense eigensolver up to this many vertices
+
+
+@dataclass
+class Skeleton:
+    """A feature skeleton (5.2.2) of s points in a d-dimensional feature space (d = 3)."""
+
+    points: np.ndarray  #: (s,d) feature-space coordinates (rows of the embedding)
+    edges: np.ndarray  #: (e,2) int64 pairs of point indices (a tree: e = s - 1)
+    centre: int  #: index of the centre vertex v0's point
+    kinds: tuple  #: (s,) 'centre', 'branch', 'rendezvous' or 'end'
+    vertices: np.ndarray  #: (s,) int64 graph vertex (mesh vertex or contour pixel) of each point
+    labels: np.ndarray  #: (n,) int64 set (GMM cluster, or part of a divided one) of every graph vertex
+
+    @property
+    def ends(self) -> np.ndarray:
+        """Indices of the 'end' points."""
+        return np.array([i for i, k in enumerate(self.kinds) if k == "end"], dtype=np.int64)
+
+    @property
+    def length(self) -> float:
+        """Total length of the segments in the feature space."""
+        if len(self.edges) == 0:
+            return 0.0
+        return float(np.linalg.norm(self.points[self.edges[:, 0]] - self.points[self.edges[:, 1]], axis=1).sum())
+
+
+# ---------------------------------------------------------------------------------------------- graphs
+
+
+def _finite_points(P, d: int, what: str) -> np.ndarray:
+    P = np.asarray(P, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != d:
+        raise BolusError(f"{what} must be an (n, {d}) array, got shape {P.shape}")
+    if not np.isfinite(P).all():
+        raise BolusError(f"{what} contain NaN or infinite coordinates")
+    return P
+
+
+def _symmetric(rows, cols, d, n) -> sp.csr_matrix:
+    """Symmetric csr (n,n) of distances d on the pairs (rows, cols), duplicates and self pairs removed."""
+    rows, cols, d = np.asarray(rows), np.asarray(cols), np.asarray(d, dtype=np.float64)
+    keep = rows != cols
+    lo, hi = np.minimum(rows[keep], cols[keep]), np.maximum(rows[keep], cols[keep])
+    key, first = np.unique(lo.astype(np.int64) * n + hi, return_index=True)
+    lo, hi, d = key // n, key % n, d[keep][first]
+    return sp.coo_matrix((np.r_[d, d], (np.r_[lo, hi], np.r_[hi, lo])), shape=(n, n)).tocsr()
+
+
+def link_components(points, D: sp.spmatrix) -> sp.csr_matrix:
+    """A connected graph: D (n,n) symmetric sparse edge lengths on points (n,d), plus, while it is in pieces,
+    for every piece the shortest pair (i in it, j outside it) (Boruvka's rule: each round at least halves the
+    number of pieces).  Returns (n,n) csr of lengths; D itself when already connected.  Stored zeros (equal
+    points) count as edges."""
+    P = np.asarray(points, dtype=np.float64)
+    n = len(P)
+    D = sp.csr_matrix(D)
+    pattern = sp.csr_matrix((np.ones(D.nnz), D.indices, D.indptr), shape=D.shape)
+    ncomp, lab = connected_components(pattern, directed=False)
+    if ncomp <= 1:
+        return D
+    tree = cKDTree(P)
+    kq = min(n, 16)
+    dist, idx = tree.query(P, k=kq)
+    dist, idx = dist.reshape(n, kq), idx.reshape(n, kq)
+    add_r, add_c, add_d = [], [], []
+    while ncomp > 1:
+        other = lab[idx] != lab[:, None]
+        dd = np.where(other, dist, np.inf)
+        j = np.argmin(dd, axis=1)
+        best_d = dd[np.arange(n), j]
+        best_j = idx[np.arange(n), j]
+        pairs = []
+        for c in range(ncomp):
+            members = np.flatnonzero(lab == c)
+            i = members[np.argmin(best_d[members])]
+            if np.isfinite(best_d[i]):
+                pairs.append((i, best_j[i], best_d[i]))
+            else:  # no other piece among the 16 nearest of any member: search the rest directly
+                rest = np.flatnonzero(lab != c)
+                dq, jq = cKDTree(P[rest]).query(P[members])
+                a = int(np.argmin(dq))
+                pairs.append((members[a], rest[jq[a]], dq[a]))
+        for i, jj, d in pairs:
+            add_r.append(i)
+            add_c.append(jj)
+            add_d.append(d)
+        A = pattern + _symmetric(np.array(add_r), np.array(add_c), np.ones(len(add_r)), n)
+        ncomp, lab = connected_components(A, directed=False)
+    C = D.tocoo()
+    E = _symmetric(np.r_[C.row, add_r], np.r_[C.col, add_c], np.r_[C.data, add_d], n)
+    return E
+
+
+def _weights_from_lengths(D: sp.csr_matrix) -> sp.csr_matrix:
+    """Gaussian weights (eqs. 5-8, 5-10) of a symmetric length matrix, sigma the mean over its edges."""
+    U = sp.triu(D, 1).tocoo()
+    w = gaussian_weights(U.data)
+    n = D.shape[0]
+    return sp.coo_matrix((np.r_[w, w], (np.r_[U.row, U.col], np.r_[U.col, U.row])), shape=(n, n)).tocsr()
+
+
+def contour_samples(points2d, count: int = CONTOUR_SAMPLES) -> np.ndarray:
+    """Indices (min(P, count),) of contour points spread evenly over points2d (P,2): farthest-point sampling
+    from the point nearest the centroid (deterministic; every point when P <= count)."""
+    P = _finite_points(points2d, 2, "contour points")
+    n, count = len(P), int(count)
+    if n <= count:
+        return np.arange(n)
+    chosen = np.empty(count, np.int64)
+    chosen[0] = int(np.argmin(((P - P.mean(axis=0)) ** 2).sum(axis=1)))
+    d2 = ((P - P[chosen[0]]) ** 2).sum(axis=1)
+    for i in range(1, count):
+        chosen[i] = int(np.argmax(d2))
+        np.minimum(d2, ((P - P[chosen[i]]) ** 2).sum(axis=1), out=d2)
+    return np.sort(chosen)
+
+
+def contour_graph(points2d, neighbours: int | None = None) -> sp.csr_matrix:
+    """Edge lengths (P,P) csr of the symmetrised kNN graph of contour pixels points2d (P,2) (eq. 5-9 distances;
+    each pixel joined to its ``neighbours`` nearest, by default ``NEIGHBOUR_SHARE`` of the points and at least
+    ``MIN_NEIGHBOURS``; pieces linked by `link_components`)."""
+    P = _finite_points(points2d, 2, "contour points")
+    n = len(P)
+    if n < FEATURE_DIMENSIONS + 2:
+        raise BolusError(f"the contour has {n} points, too few for a feature space (at least "
+                         f"{FEATURE_DIMENSIONS + 2})")
+    k = max(MIN_NEIGHBOURS, int(round(NEIGHBOUR_SHARE * n))) if neighbours is None else int(neighbours)
+    if k < 1:
+        raise BolusError(f"neighbours must be at least 1, got {neighbours}")
+    k = min(k + 1, n)
+    dist, idx = cKDTree(P).query(P, k=k)
+    rows = np.repeat(np.arange(n), k)
+    return link_components(P, _symmetric(rows, idx.ravel(), dist.ravel(), n))
+
+
+def mesh_graph(V, F) -> sp.csr_matrix:
+    """Edge lengths (n,n) csr of a triangle mesh's one-ring graph (eq. 5-11 on the edges of V (n,3), F (m,3));
+    pieces linked by `link_components`."""
+    topo = MeshTopology(V, F)  # shapes, finiteness and indices checked here
+    if topo.n < FEATURE_DIMENSIONS + 2:
+        raise BolusError(f"the model has {topo.n} vertices, too few for a feature space (at least "
+                         f"{FEATURE_DIMENSIONS + 2})")
+    E = topo.edges
+    return link_components(topo.V, _symmetric(E[:, 0], E[:, 1], topo.edge_lengths, topo.n))
+
+
+# ---------------------------------------------------------------------------------------------- embeddings
+
+
+def nested_dissection(A: sp.spmatrix, coords, leaf: int = 32) -> np.ndarray:
+    """A fill-reducing elimination order (n,) of the graph A (n,n) whose vertices sit at coords (n,d): split at
+    the median of the longest extent, the vertices of one half touching the other half are the separator,
+    ordered last, both halves recursively (geometric nested dissection; pieces of <= ``leaf`` vertices kept)."""
+    A = sp.csr_matrix(A)
+    A = sp.csr_matrix((np.ones(A.nnz), A.indices, A.indptr), shape=A.shape)  # the pattern (L has negative entries)
+    X = np.asarray(coords, dtype=np.float64)
+    n = A.shape[0]
+    out, stack = [], [(np.arange(n), False)]
+    while stack:  # post-order without recursion: left half, right half, separator
+        idx, done = stack.pop()
+        if done or len(idx) <= leaf:
+            out.append(idx)
+            continue
+        P = X[idx]
+        ax = int(np.argmax(P.max(axis=0) - P.min(axis=0)))
+        left = P[:, ax] < np.median(P[:, ax])
+        if left.all() or not left.any():
+            out.append(idx)
+            continue
+        mask = np.zeros(n)
+        mask[idx[left]] = 1.0
+        rest = idx[~left]
+        touch = (A[rest] @ mask) > 0
+        stack.append((rest[touch], True))
+        stack.append((rest[~touch], False))
+        stack.append((idx[left], False))
+    return np.concatenate(out)
+
+
+def smallest_pairs(L: sp.spmatrix, k: int, rng=0, coords=None) -> tuple[np.ndarray, np.ndarray]:
+    """The k smallest eigenpairs of a graph Laplacian L (n,n): (values (k,) ascending, vectors (n,k)), signs
+    fixed as `spectral.smallest_eigenvectors` fixes them.  Above ``DENSE_MAX`` vertices: shift-invert Lanczos
+    on one sparse LU factor, in the `nested_dissection` order of coords (n,d) when given, else SuperLU's
+    symmetric minimum degree order; start vector from ``rng``.  Factor entries, 41k-vertex sphere: 4.3M
+    (nested dissection, 0.3 s), 7.3M (SuperLU's default COLAMD), 11.8M (minimum degree); 50k-vertex torus:
+    7.2M, 11.3M, 4.8M."""
+    n = L.shape[0]
+    if n <= DENSE_MAX or k >= n - 1:
+        return smallest_eigenvectors(L, k, rng)
+    L = sp.csr_matrix(L)
+    scale = float(np.abs(L.diagonal()).mean()) or 1.0
+    shift = -1e-6 * scale  # L is singular: L - shift I is positive definite (diagonal pivots are stable)
+    M = L - shift * sp.identity(n, format="csr")
+    if coords is not None:
+        p = nested_dissection(L, coords)
+        lu = splu(M[p][:, p].tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        inv = np.empty(n, np.int64)
+        inv[p] = np.arange(n)
+
+        def solve(x):
+            return lu.solve(np.ascontiguousarray(x[p]))[inv]
+    else:
+        lu = splu(M.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        solve = lu.solve
+    op = LinearOperator((n, n), matvec=solve, dtype=np.float64)
+    vals, vecs = eigsh(L, k=k, sigma=shift, which="LM", OPinv=op, v0=as_rng(rng).standard_normal(n), tol=1e-10)
+    order = np.argsort(vals)
+    vals, vecs = vals[order], vecs[:, order]
+    idx = np.argmax(np.abs(vecs), axis=0)
+    signs = np.sign(vecs[idx, np.arange(k)])
+    signs[signs == 0] = 1.0
+    return vals, vecs * signs
+
+
+def spectral_embedding(D: sp.spmatrix, k: int = FEATURE_DIMENSIONS, rng=0, coords=None) -> np.ndarray:
+    """Feature space (n,k) of a connected graph given by its edge lengths D (n,n): Gaussian weights, L = D - W,
+    the eigenvectors of the k smallest non-zero eigenvalues (the constant one dropped).  coords (n,d),
+    optional: vertex positions, for the elimination order (`smallest_pairs`)."""
+    n = D.shape[0]
+    k = int(k)
+    if k < 1 or n < k + 2:
+        raise BolusError(f"cannot take {k} feature dimensions from a graph of {n} vertices")
+    _, U = smallest_pairs(graph_laplacian(_weights_from_lengths(sp.csr_matrix(D))), k + 1, rng, coords)
+    return U[:, 1:]
+
+
+def image_embedding(points2d, k: int = FEATURE_DIMENSIONS, neighbours: int | None = None, rng=0) -> np.ndarray:
+    """Feature space (P,k) of contour pixels points2d (P,2) (eqs. 5-8, 5-9 on a kNN graph, module doc).  Above
+    ``CONTOUR_SAMPLES`` points the graph is built on `contour_samples` and every point takes the feature
+    coordinates of its nearest sample."""
+    P = _finite_points(points2d, 2, "contour points")
+    idx = contour_samples(P)
+    U = spectral_embedding(contour_graph(P[idx], neighbours), k, rng, P[idx])
+    if len(idx) == len(P):
+        return U
+    return U[cKDTree(P[idx]).query(P)[1]]
+
+
+def model_embedding(V, F, k: int = FEATURE_DIMENSIONS, rng=0) -> np.ndarray:
+    """Feature space (n,k) of a triangle mesh's vertices V (n,3), F (m,3) (eqs. 5-10, 5-11, one-ring W)."""
+    V = np.asarray(V, dtype=np.float64)
+    return spectral_embedding(mesh_graph(V, F), k, rng, V)
+
+
+# ---------------------------------------------------------------------------------------------- skeleton
+
+
+def _gmm(X: np.ndarray, count, rng: np.random.Generator, means_init=None) -> np.ndarray:
+    """Labels (n,) of a Gaussian mixture on the rows of X (n,d); count an int or 'auto' (module doc)."""
+    from sklearn.mixture import GaussianMixture
+
+    n = len(X)
+    fit = X if n <= GMM_ROWS else X[np.sort(rng.choice(n, GMM_ROWS, replace=False))]
+    seed = int(rng.integers(0, 2**31 - 1))
+
+    def model(c):
+        kw = {"means_init": means_init, "n_init": 1} if means_init is not None else {"n_init": GMM_RESTARTS}
+        return GaussianMixture(n_components=c, covariance_type="full", reg_covar=REG_COVAR, random_state=seed,
+                               **kw).fit(fit)
+
+    if count == "auto":
+        fits = [model(c) for c in AUTO_CLUSTERS if c <= len(fit)]
+        gm = min(fits, key=lambda g: g.bic(fit))
+    else:
+        gm = model(min(int(count), len(fit)))
+    lab = gm.predict(X)
+    _, lab = np.unique(lab, return_inverse=True)  # empty components dropped
+    return lab.reshape(-1).astype(np.int64)
+
+
+def _branch_pieces(members: np.ndarray, r: np.ndarray, A: sp.csr_matrix) -> list[np.ndarray]:
+    """The graph-connected pieces of a set's outer half holding >= BRANCH_SHARE of it (module doc)."""
+    rm = r[members]
+    lo, hi = float(rm.min()), float(rm.max())
+    outer = members[rm >= 0.5 * (lo + hi)]
+    if len(outer) < 2:
+        return [outer]
+    nc, lab = connected_components(A[outer][:, outer], directed=False)
+    if nc == 1:
+        return [outer]
+    sizes = np.bincount(lab, minlength=nc)
+    return [outer[lab == c] for c in np.flatnonzero(sizes >= BRANCH_SHARE * len(outer))]
+
+
+def _ring(A: sp.csr_matrix, v: int) -> np.ndarray:
+    return A.indices[A.indptr[v]:A.indptr[v + 1]]
+
+
+def _tree_path(pred: np.ndarray, v: int, root: int) -> np.ndarray:
+    """Vertices from v to root along the predecessor tree (v first)."""
+    path = [v]
+    while path[-1] != root:
+        path.append(int(pred[path[-1]]))
+    return np.array(path, dtype=np.int64)
+
+
+def _uphill(A: sp.csr_matrix, r: np.ndarray, v: int) -> int:
+    """From v, steepest ascent of r over graph neighbours to a local maximum."""
+    while True:
+        nb = _ring(A, v)
+        if len(nb) == 0:
+            return v
+        u = int(nb[np.argmax(r[nb])])
+        if r[u] <= r[v]:
+            return v
+        v = u
+
+
+_PRIORITY = {"centre": 3, "end": 2, "rendezvous": 1, "branch": 0}
+
+
+def _merge_close(kind: dict, pred: np.ndarray, X: np.ndarray, v0: int) -> tuple[list, dict]:
+    """Skeleton nodes (kind: vertex -> kind) joined to the next node towards v0 along the tree; two nodes
+    closer than MERGE_RADIUS along it become one (the lower kind of centre > end > rendezvous > branch merged
+    into the other, ends never into each other).  Returns (kept vertices, v0 first; parent of each kept vertex
+    but v0).  ``kind`` loses the merged vertices."""
+    parent, gap = {}, {}
+    for v in kind:
+        if v == v0:
+            continue
+        u, length = v, 0.0
+        while True:
+            p = int(pred[u])
+            length += float(np.linalg.norm(X[u] - X[p]))
+            u = p
+            if u in kind:
+                break
+        parent[v], gap[v] = u, length
+    merged = {}
+
+    def root(v):
+        while v in merged:
+            v = merged[v]
+        return v
+
+    for v in sorted(parent, key=lambda v: (gap[v], v)):  # shortest segments first
+        if gap[v] >= MERGE_RADIUS:
+            break
+        a, b = root(v), root(parent[v])
+        if a == b or kind[a] == kind[b] == "end":
+            continue
+        if _PRIORITY[kind[a]] > _PRIORITY[kind[b]]:
+            a, b = b, a
+        merged[a] = b  # a (lower kind, or the child of two equal kinds) goes into b
+    keep = sorted((v for v in kind if v not in merged), key=lambda v: (v != v0, v))
+    out = {}
+    for v in parent:
+        a, b = root(v), root(parent[v])
+        if a != b:
+            out[a] = b
+    for v in merged:
+        del kind[v]
+    return keep, out
+
+
+def skeleton(embedding, graph, clusters=DEFAULT_CLUSTERS, rng=0) -> Skeleton:
+    """The feature skeleton (5.2.2 steps 1-3, module doc) of an embedding (n,d) whose rows are the vertices of
+    graph (n,n) (sparse; its pattern gives the edges, e.g. `mesh_graph` or `contour_graph`).
+
+    clusters: the number of GMM clusters (int >= 1) or 'auto' (BIC over ``AUTO_CLUSTERS``).  Deterministic for
+    a fixed ``rng``."""
+    E = np.asarray(embedding, dtype=np.float64)
+    if E.ndim != 2 or E.shape[0] < 2 or E.shape[1] < 1 or not np.isfinite(E).all():
+        raise BolusError(f"the feature space must be a finite (n, d) array with n >= 2, got shape {E.shape}")
+    n = len(E)
+    if not sp.issparse(graph) or graph.shape != (n, n):
+        raise BolusError(f"the graph must be a sparse ({n}, {n}) matrix, one row per embedding row")
+    if clusters != "auto":
+        try:
+            ok = int(clusters) == clusters and int(clusters) >= 1
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise BolusError(f"clusters must be a whole number >= 1 or 'auto', got {clusters!r}")
+    rng = as_rng(rng)
+    X = E - E.mean(axis=0)
+    rms = float(np.sqrt((X**2).sum(axis=1).mean()))
+    v0 = int(np.argmin((X**2).sum(axis=1)))
+    if rms <= 0:  # every vertex at one point of the feature space
+        return Skeleton(E[[v0]].copy(), np.zeros((0, 2), np.int64), 0, ("centre",), np.array([v0]),
+                        np.zeros(n, np.int64))
+    X = X / rms
+    # the graph, lengths measured in the feature space, linked when in pieces
+    G = sp.csr_matrix(graph)
+    G = sp.csr_matrix((np.ones(G.nnz), G.indices.copy(), G.indptr.copy()), shape=(n, n))
+    G = (G + G.T).tocoo()
+    lengths = np.linalg.norm(X[G.row] - X[G.col], axis=1)
+    D = link_components(X, _symmetric(G.row, G.col, np.maximum(lengths, 1e-12), n))
+    A = sp.csr_matrix((np.ones(D.nnz), D.indices, D.indptr), shape=(n, n))
+    r = np.linalg.norm(X - X[v0], axis=1)
+    # step 1: GMM clusters; step 2: clusters holding several branches divided by a GMM
+    with threadpool_limits(1):  # 3x3 covariances: threads only wait on each other
+        labels = _gmm(X, clusters, rng)
+    sets = []
+    for c in range(int(labels.max()) + 1):
+        members = np.flatnonzero(labels == c)
+        pieces = _branch_pieces(members, r, A)
+        if len(pieces) > 1:
+            means = np.array([X[p].mean(axis=0) for p in pieces])
+            with threadpool_limits(1):
+                sub = _gmm(X[members], len(pieces), rng, means_init=means)
+            sets.extend(members[sub == s] for s in range(int(sub.max()) + 1))
+        else:
+            sets.append(members)
+    set_labels = np.empty(n, np.int64)
+    for s, members in enumerate(sets):
+        set_labels[members] = s
+    # feature points: the farthest vertex of each set; an end (tip) or a point along a branch
+    rmax = float(r.max())
+    feature, ends = [], []
+    for members in sets:
+        f = int(members[np.argmax(r[members])])
+        if f == v0 or f in feature:
+            continue
+        feature.append(f)
+        if not (r[_ring(A, f)] > r[f]).any() and r[f] >= END_MIN_RADIUS * rmax:
+            ends.append(f)
+    # step 3: connection along one shortest-path tree from v0 to the ends
+    _, pred = dijkstra(D, directed=False, indices=v0, return_predecessors=True)
+    path_of = {e: _tree_path(pred, e, v0) for e in ends}
+    on_tree = np.zeros(n, bool)
+    children = np.zeros(n, np.int64)
+    on_tree[v0] = True
+    for e in ends:
+        for child, p in zip(path_of[e][:-1], path_of[e][1:]):
+            if not on_tree[child]:
+                on_tree[child] = True
+                children[p] += 1
+    kind = {v0: "centre"}
+    kind.update((e, "end") for e in ends)
+    for v in np.flatnonzero(children >= 2):
+        kind.setdefault(int(v), "rendezvous")
+    # the other feature points: uphill to the end of their branch, marked where that branch's path passes nearest
+    for f in feature:
+        if f in kind:
+            continue
+        tip = _uphill(A, r, f)
+        if tip in path_of:
+            path = path_of[tip]
+            kind.setdefault(int(path[np.argmin(np.linalg.norm(X[path] - X[f], axis=1))]), "branch")
+    keep, parent = _merge_close(kind, pred, X, v0)
+    index = {v: i for i, v in enumerate(keep)}
+    edges = sorted((min(index[v], index[p]), max(index[v], index[p])) for v, p in parent.items())
+    verts = np.array(keep, dtype=np.int64)
+    return Skeleton(E[verts].copy(), np.array(edges, dtype=np.int64).reshape(-1, 2), 0,
+                    tuple(kind[v] for v in keep), verts, set_labels)
+
+
+def model_skeleton(V, F, clusters=DEFAULT_CLUSTERS, k: int = FEATURE_DIMENSIONS, rng=0) -> Skeleton:
+    """`skeleton` of a triangle mesh's feature space (`model_embedding`)."""
+    V = np.asarray(V, dtype=np.float64)
+    D = mesh_graph(V, F)
+    return skeleton(spectral_embedding(D, k, rng, V), D, clusters, rng)
+
+
+def image_skeleton(points2d, clusters=DEFAULT_CLUSTERS, k: int = FEATURE_DIMENSIONS, neighbours: int | None = None,
+                   rng=0) -> Skeleton:
+    """`skeleton` of contour pixels' feature space (`image_embedding`), computed on `contour_samples`; its
+    ``vertices`` and ``labels`` refer to the given points (labels: those of the nearest sample)."""
+    P = _finite_points(points2d, 2, "contour points")
+    idx = contour_samples(P)
+    D = contour_graph(P[idx], neighbours)
+    sk = skeleton(spectral_embedding(D, k, rng, P[idx]), D, clusters, rng)
+    if len(idx) < len(P):
+        sk.vertices = idx[sk.vertices]
+        sk.labels = sk.labels[cKDTree(P[idx]).query(P)[1]]
+    return sk
+
+
+# ---------------------------------------------------------------------------------------------- comparison
+
+
+def resample(skel: Skeleton, count: int = SAMPLES) -> np.ndarray:
+    """(count,d) points evenly spaced by length along the skeleton's segments (at the middles of count equal
+    steps); a skeleton without length gives count copies of its centre."""
+    count = int(count)
+    if count < 1:
+        raise BolusError(f"resample needs at least 1 point, got {count}")
+    P = np.asarray(skel.points, dtype=np.float64)
+    if len(skel.edges) == 0:
+        return np.repeat(P[[skel.centre]], count, axis=0)
+    a, b = P[skel.edges[:, 0]], P[skel.edges[:, 1]]
+    seg = np.linalg.norm(b - a, axis=1)
+    total = float(seg.sum())
+    if total <= 0:
+        return np.repeat(P[[skel.centre]], count, axis=0)
+    cum = np.r_[0.0, np.cumsum(seg)]
+    t = (np.arange(count) + 0.5) * total / count
+    e = np.clip(np.searchsorted(cum, t, side="right") - 1, 0, len(seg) - 1)
+    frac = np.where(seg[e] > 0, (t - cum[e]) / np.where(seg[e] > 0, seg[e], 1.0), 0.0)
+    return a[e] + frac[:, None] * (b[e] - a[e])
+
+
+def skeleton_samples(skel: Skeleton, count: int = SAMPLES) -> np.ndarray:
+    """`resample`d points (count,d), centred at the centre point v0 and scaled to unit RMS radius about it."""
+    S = resample(skel, count) - np.asarray(skel.points, dtype=np.float64)[skel.centre]
+    rms = float(np.sqrt((S**2).sum(axis=1).mean()))
+    return S / rms if rms > 0 else S
+
+
+def start_rotations(count: int = 48, rng=0) -> np.ndarray:
+    """(count,3,3) starting orientations for `icp`: the identity first, then the 24 rotations of the cube each
+    followed by its mirror image (-R), then random rotations from ``rng`` (module doc)."""
+    count = int(count)
+    if count < 1:
+        raise BolusError(f"icp needs at least 1 starting orientation, got {count}")
+    rots = []
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            M = np.zeros((3, 3))
+            M[np.arange(3), perm] = signs
+            if np.linalg.det(M) > 0:
+                rots.append(M)
+    rots.sort(key=lambda M: (-np.trace(M), tuple(M.ravel())))  # identity first
+    mats = [m for R in rots for m in (R, -R)]
+    g = as_rng(rng)
+    while len(mats) < count:
+        q, rr = np.linalg.qr(g.standard_normal((3, 3)))
+        q = q * np.sign(np.diag(rr))
+        mats.append(q if np.linalg.det(q) > 0 else -q)
+    return np.array(mats[:count])
+
+
+def _kabsch(Y: np.ndarray, Z: np.ndarray, det: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Batched eq. 5-13: R (s,3,3) with det(R) = det (s,), T (s,3) minimising sum |R y_i + T - z_i|^2 for
+    Y (n,3) and Z (s,n,3)."""
+    my = Y.mean(axis=0)
+    mz = Z.mean(axis=1)
+    H = np.einsum("ni,snj->sij", Y - my, Z - mz[:, None, :])
+    U, _, Vt = np.linalg.svd(H)
+    V, Ut = Vt.transpose(0, 2, 1), U.transpose(0, 2, 1)
+    d = np.sign(np.linalg.det(V @ Ut))
+    d[d == 0] = 1.0
+    Dg = np.ones((len(H), 1, 3))
+    Dg[:, 0, 2] = d * det
+    R = (V * Dg) @ Ut  # V diag(1, 1, d det) U^T
+    T = mz - np.einsum("sij,j->si", R, my)
+    return R, T
+
+
+def icp(X, Y, iterations: int = 50, starts: int = 48, rng=0, tol: float = 1e-12):
+    """Iterative closest points (eqs. 5-12..5-14): Y (n,3) moved onto X (m,3).
+
+    From every orientation of `start_rotations` (``starts`` of them, translation matching the centroids) at
+    once: pair each moved y_i with its closest x (Z, eq. 5-12), refit (R, T) to the pairs (eq. 5-13), at most
+    ``iterations`` times or until no start's error moves by more than ``tol``.  Returns (R (3,3), T (3,),
+    error) of the best start, error = RMS over i of |R y_i + T - z_i| (eq. 5-14) with z_i the closest x."""
+    X = _finite_points(X, 3, "the points to match (X)")
+    Y = _finite_points(Y, 3, "the points to move (Y)")
+    if len(X) == 0 or len(Y) == 0:
+        raise BolusError("icp needs at least one point in each set")
+    if int(iterations) < 0:
+        raise BolusError(f"iterations must be >= 0, got {iterations}")
+    R = start_rotations(starts, rng)
+    det = np.sign(np.linalg.det(R))
+    T = X.mean(axis=0) - np.einsum("sij,j->si", R, Y.mean(axis=0))
+    tree = cKDTree(X)
+    s, n = len(R), len(Y)
+
+    def pair(R, T):
+        moved = np.einsum("sij,nj->sni", R, Y) + T[:, None, :]
+        d, j = tree.query(moved.reshape(-1, 3))
+        return np.sqrt((d.reshape(s, n) ** 2).mean(axis=1)), X[j.reshape(s, n)]
+
+    err, Z = pair(R, T)
+    for _ in range(int(iterations)):
+        R_new, T_new = _kabsch(Y, Z, det)
+        err_new, Z_new = pair(R_new, T_new)
+        better = err_new <= err  # a start never gets worse (guards against round-off)
+        R[better], T[better], Z[better] = R_new[better], T_new[better], Z_new[better]
+        moved = float(np.abs(err - np.where(better, err_new, err)).max())
+        err = np.where(better, err_new, err)
+        if moved <= tol:
+            break
+    b = int(np.argmin(err))
+    return R[b], T[b], float(err[b])
+
+
+def dissimilarity(a, b, count: int = SAMPLES, iterations: int = 50, starts: int = 48) -> float:
+    """Symmetric dissimilarity of two skeletons (module doc, 5.3): a and b are `Skeleton`s or their
+    `skeleton_samples` (count,3); the mean of the RMS errors (eq. 5-14) of ICP a->b and b->a."""
+    A = skeleton_samples(a, count) if isinstance(a, Skeleton) else _finite_points(a, 3, "skeleton samples")
+    B = skeleton_samples(b, count) if isinstance(b, Skeleton) else _finite_points(b, 3, "skeleton samples")
+    return 0.5 * (icp(A, B, iterations, starts)[2] + icp(B, A, iterations, starts)[2])

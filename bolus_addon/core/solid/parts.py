@@ -1,0 +1,324 @@
+"""Closed solid print parts of a bolus with planar joints and connectors (seed 6.3-6.4.3,
+eqs. 6-38..6-40; issue 11 point 2).
+
+`split_solid` takes the closed solid (a `shell.Shell`'s arrays), the skin region it was
+built on and a part label per skin triangle (the area-balanced cut of
+`print_segmentation`), and returns the solid cut into closed parts:
+
+1. neighbouring parts: skin labels that share a skin edge;
+2. common plane of each pair (6.4.3): a linear support vector machine on the two parts'
+   skin vertices, x^T W + b = 0 (eqs. 6-38..6-40), W normalised, pointing from the lower
+   label to the higher.  We use ``sklearn.svm.LinearSVC`` (the primal of eq. 6-38 with a
+   squared hinge, C = 1e3): the hard-margin plane of eq. 6-38 is its large-C limit, it
+   costs O(n) per pass on the tens of thousands of vertices of a face region where
+   ``SVC(kernel='linear')`` (the dual, eq. 6-39) grows with n^2, and it still returns a
+   plane when a wavy border is not exactly separable.  The coordinates are centred and
+   scaled by one factor first (an isotropic scaling keeps the maximum-margin plane), so
+   LinearSVC's penalty on the intercept does not bias the plane; vertices on the shared
+   border belong to both parts and are left out; classes are balanced.
+3. cells: the solid split by every plane (``Manifold.split_by_plane``), each connected
+   piece (``decompose``) a cell.  A plane reaches beyond its joint and may cross the shell
+   elsewhere, so a cell goes to the part whose skin lies under it (area vote of the
+   nearest skin triangles of the cell's inner faces; all its faces if it has none); then
+   a group of a part's cells cut off from the part's largest group goes to the part it
+   shares most plane face with (a sliver along the rim votes for the skin under its outer
+   face, which need not be the part it touches).  Every cell lies in one region of the
+   plane arrangement (a sign per plane).  Two cells of different parts in one region (a
+   plane crossing a strongly curved shell twice) get an extra separating plane (the same
+   SVM on their vertices) as long as that helps, at most MAX_EXTRA_PLANES; what is left
+   goes with the larger and is warned about.
+4. parts: manifold3d cannot glue pieces back together (the union of two halves of a cut
+   keeps the cut as a slit), so each part is cut out of the whole solid once:
+   part q = solid ∩ K_q, K_q a union of convex polytopes (the bounding box trimmed by
+   planes): one per cell region of q grown over all regions that hold no material and
+   one more over each two neighbouring regions of q (so no two polytopes of K_q merely
+   touch inside the solid).  The parts are closed by construction and their volumes add
+   up to the solid's to round-off.  Separate crumbs of the solid and slivers the planes
+   cut off, under CRUMB_MM3 each, are left out with a warning (a slicer drops them too);
+   a part that still falls into pieces is warned about.
+5. joints: the faces two parts share on one plane (2D CrossSections of their cut faces,
+   intersected).  The largest face of each pair gets the connectors (`connectors`: sized
+   from the wall thickness at the joint, placed near the two ends of the face, each part
+   one peg and one hole), or a note (and a warning) why not.
+
+Faces: the solid's faces keep their ``side`` (manifold3d carries the face ids through the
+booleans), faces on a joint plane are SIDE_CUT, peg and hole walls SIDE_CONNECTOR.
+
+Modules: steps 1-3 and step 4's region terms in `solid_planes`, step 5 in `solid_joints`; this
+module drives them and cuts the parts out (step 4).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+import manifold3d as m3
+
+from . import connectors as conn
+from .connectors import Connector
+from ..errors import BolusError
+from .manifold import SIDE_CONNECTOR, SIDE_CUT
+from .joints import MIN_JOINT_AREA, Joint, _connect, _joints, _wall_probe
+from .planes import (
+    CRUMB_MM3,
+    MAX_SVM_POINTS,
+    MIN_CONTACT_AREA,
+    ON_PLANE_TOL,
+    SVM_C,
+    _cell_contacts,
+    _cell_owner,
+    _cell_sections,
+    _connected_owners,
+    _drop_crumbs,
+    _faces,
+    _ids,
+    _region_terms,
+    _signs,
+    _split_cells,
+    _tracked,
+    skin_neighbours,
+    svm_plane,
+)
+from ..mesh.topology import MeshTopology, check_mesh
+
+__all__ = ["Connector", "Joint", "SolidParts", "skin_neighbours", "svm_plane", "split_solid",
+           "SVM_C", "MAX_SVM_POINTS", "MAX_EXTRA_PLANES", "MIN_JOINT_AREA"]
+
+MAX_EXTRA_PLANES = 4  #: separating planes added for cells of two parts in one arrangement region
+WRONG_SIDE_WARN = 0.15  #: warn when a joint plane leaves over 15 % of the two parts' skin vertices on the wrong side
+VOLUME_RTOL = 1e-6  #: parts' volumes must add up to the solid's to this relative round-off
+
+
+@dataclass
+class SolidParts:
+    """Result of `split_solid`: k closed parts in one array pair."""
+
+    V: np.ndarray  #: (n,3) float64 mm
+    F: np.ndarray  #: (m,3) int64, each part a closed manifold, outward wound
+    labels: np.ndarray  #: (m,) int64 part of each face, 0..k-1
+    side: np.ndarray  #: (m,) int8 SIDE_* of each face
+    volumes_mm3: np.ndarray  #: (k,) with connectors
+    joints: list  #: [Joint]
+    warnings: list  #: [str]
+    plain_volumes_mm3: np.ndarray | None = None  #: (k,) before connectors (they add up to the solid's)
+    solid_volume_mm3: float = float("nan")
+    planes: np.ndarray | None = None  #: (p,4) rows (normal, offset) of every cutting plane (extra ones last)
+
+    @property
+    def part_count(self) -> int:
+        return len(self.volumes_mm3)
+
+    def part(self, q: int) -> tuple[np.ndarray, np.ndarray]:
+        """(V, F) of part q alone (compacted)."""
+        Fq = self.F[self.labels == q]
+        used, inv = np.unique(Fq.ravel(), return_inverse=True)
+        return self.V[used], inv.reshape(-1, 3)
+
+
+# ----------------------------------------------------------------------------- main
+
+def _check_input(V, F, side, skin_V, skin_F, skin_labels, clearance):
+    V, F = check_mesh(V, F, "the solid", nondegenerate=False)
+    side = np.asarray(side)
+    if side.shape != (len(F),):
+        raise BolusError(f"the solid's face sides must be one per triangle ({len(F)}), got shape {side.shape}")
+    skin_V, skin_F = check_mesh(skin_V, skin_F, "the skin region", nondegenerate=False)
+    lab = np.asarray(skin_labels)
+    if lab.shape != (len(skin_F),):
+        raise BolusError(f"the skin part labels must be one per skin triangle ({len(skin_F)}), got shape {lab.shape}")
+    if not np.issubdtype(lab.dtype, np.integer):
+        if not np.all(np.isfinite(lab)) or np.any(lab != np.round(lab)):
+            raise BolusError("the skin part labels must be whole numbers")
+    lab = lab.astype(np.int64)
+    if lab.min() < 0:
+        raise BolusError(f"the skin part labels must be 0 or more, got {int(lab.min())}")
+    k = int(lab.max()) + 1
+    missing = sorted(set(range(k)) - set(np.unique(lab).tolist()))
+    if missing:
+        raise BolusError(f"the skin part labels skip part(s) {missing}: number the parts 0..{k - 1}")
+    if not (np.isfinite(clearance) and 0 <= clearance < 2.0):
+        raise BolusError(f"the connector clearance must lie in [0, 2) mm, got {clearance}")
+    return V, F, side.astype(np.int8), skin_V, skin_F, lab, k
+
+
+def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = conn.CLEARANCE,
+                connectors: bool = True, rng=0, progress=None) -> SolidParts:
+    """Cut the closed solid V (n,3) mm, F (m,3), side (m,) SIDE_* into closed parts, one per
+    skin label, separated by the SVM planes of neighbouring parts (eqs. 6-38..6-40), with a
+    peg and a hole per joint end (``connectors``; clearance mm).
+
+    skin_V (ns,3), skin_F (ms,3): the skin region the solid was built on; skin_labels (ms,)
+    int 0..k-1 part per skin triangle (`print_segmentation`).  Returns `SolidParts`.
+    BolusError on a solid that is not closed or on inconsistent labels; warnings name
+    parts that fell apart, joints left plain and planes that leave much skin on the wrong side."""
+    report = progress or (lambda f, t: None)
+    V, F, side, skin_V, skin_F, lab, k = _check_input(V, F, side, skin_V, skin_F, skin_labels, clearance)
+    report(0.0, "solid")
+    M, rid = _tracked(V, F)
+    solid_volume = float(M.volume())
+    if not solid_volume > 0:
+        raise BolusError("the solid has no volume (is it wound inside out?)")
+    warnings: list[str] = []
+    M = _drop_crumbs(M, warnings)
+    skin_topo = MeshTopology(skin_V, skin_F)
+
+    # 1-2: neighbours and their planes
+    report(0.05, "common planes")
+    pairs = skin_neighbours(skin_F, lab, skin_topo)
+    plane_rows, plane_pairs = [], []
+    for i, j, _ in pairs:
+        vi = np.unique(skin_F[lab == i])
+        vj = np.unique(skin_F[lab == j])
+        only_i, only_j = np.setdiff1d(vi, vj), np.setdiff1d(vj, vi)
+        n, off, wrong = svm_plane(skin_V[only_i if len(only_i) else vi], skin_V[only_j if len(only_j) else vj], rng)
+        if wrong > WRONG_SIDE_WARN:
+            warnings.append(f"the joint plane between parts {i} and {j} leaves {100 * wrong:.1f} % of their skin "
+                            "on the other part's side: their border is far from straight")
+        plane_rows.append(np.r_[n, off])
+        plane_pairs.append((i, j))
+    planes = np.array(plane_rows, dtype=np.float64).reshape(-1, 4)
+
+    # 3: cells and their owners
+    report(0.15, "cells")
+    tree = cKDTree(skin_topo.centroids)
+    cells, owners = [M], [None]
+    for n_off in planes:
+        cells, owners = _split_cells(cells, owners, n_off[:3], n_off[3])
+    owners = [_cell_owner(c, rid, side, tree, lab, k) for c in cells]
+    vols = [float(c.volume()) for c in cells]
+    if len(cells) > 1:
+        owners = _connected_owners(owners, vols, _cell_contacts(_cell_sections(cells, planes)))
+    extra = 0
+    while True:
+        signs = [_signs(c, planes) for c in cells] if len(planes) else [() for _ in cells]
+        regions: dict = {}
+        for ci, s in enumerate(signs):
+            regions.setdefault(s, []).append(ci)
+        conflict = None
+        for s, cis in regions.items():
+            per = {}
+            for ci in cis:
+                per[owners[ci]] = per.get(owners[ci], 0.0) + vols[ci]
+            if len(per) > 1 and sorted(per.values())[-2] >= CRUMB_MM3:  # slivers are not worth a plane
+                conflict = (s, cis, per)
+                break
+        if conflict is None or extra >= MAX_EXTRA_PLANES:
+            break
+        s, cis, per = conflict
+        top = sorted(per, key=per.get, reverse=True)[:2]
+        pts = [np.vstack([np.asarray(cells[ci].to_mesh64().vert_properties)[:, :3] for ci in cis
+                          if owners[ci] == o]) for o in top]
+        n, off, wrong = svm_plane(pts[0], pts[1], rng)
+        if wrong > 0.01:
+            break  # the two parts' pieces in this region cannot be told apart by a plane
+        planes = np.vstack([planes, np.r_[n, off]])
+        cells, owners = _split_cells(cells, owners, n, off)
+        vols = [float(c.volume()) for c in cells]
+        extra += 1
+    owner_of: dict = {}
+    for s, cis in regions.items():
+        per = {}
+        for ci in cis:
+            per[owners[ci]] = per.get(owners[ci], 0.0) + vols[ci]
+        best = max(per, key=per.get)
+        owner_of[s] = best
+        for o, v in per.items():
+            if o != best and v >= CRUMB_MM3:
+                warnings.append(f"{v:.0f} mm³ of part {o}'s material lies on part {best}'s side of every joint "
+                                f"plane and goes with part {best} (a plane crosses the shell twice there)")
+    if extra:
+        warnings.append(f"{extra} extra cutting plane(s) were needed where a joint plane crosses the shell twice")
+
+    # 4: parts
+    report(0.4, "parts")
+    lo, hi = np.asarray(M.bounding_box()[:3]), np.asarray(M.bounding_box()[3:])
+    pad = 0.1 * float(np.linalg.norm(hi - lo)) + 10.0
+    box = m3.Manifold.cube(tuple((hi - lo) + 2 * pad)).translate(tuple(lo - pad))
+    box_ids = _ids(box)
+    half = {}
+    plane_of_id = {}
+    for p, row in enumerate(planes):
+        for s in (1, -1):
+            H = box.trim_by_plane(tuple(s * row[:3]), float(-s * row[3]))
+            half[(p, s)] = H
+            for i in _ids(H) - box_ids:
+                plane_of_id[i] = p
+    part_M = []
+    for q in range(k):
+        if q not in owner_of.values():
+            warnings.append(f"part {q} got no material: its skin area lies on other parts' side of the joint planes")
+            part_M.append(m3.Manifold())
+            continue
+        terms = _region_terms(owner_of, q)
+        polys = []
+        for t in terms:
+            if not t:
+                polys.append(box)
+            else:
+                hs = [half[(p, s)] for p, s in sorted(t.items())]
+                polys.append(hs[0] if len(hs) == 1 else m3.Manifold.batch_boolean(hs, m3.OpType.Intersect))
+        K = polys[0] if len(polys) == 1 else m3.Manifold.batch_boolean(polys, m3.OpType.Add)
+        part_M.append(M ^ K)
+        report(0.4 + 0.3 * (q + 1) / k, f"part {q}")
+    slivers = []
+    for q, P in enumerate(part_M):
+        pieces = P.decompose() if not P.is_empty() else []
+        small = [c for c in pieces if c.volume() < CRUMB_MM3]
+        if small and len(small) < len(pieces):
+            big = [c for c in pieces if c.volume() >= CRUMB_MM3]
+            part_M[q] = m3.Manifold.compose(big) if len(big) > 1 else big[0]
+            slivers += [float(c.volume()) for c in small]
+    if slivers:
+        warnings.append(f"{len(slivers)} sliver(s) under {CRUMB_MM3:g} mm³ that the joint planes cut off "
+                        f"({sum(slivers):.3g} mm³ in all) are left out of the parts")
+    plain = np.array([float(P.volume()) for P in part_M])
+    kept = float(M.volume()) - sum(slivers)
+    if abs(plain.sum() - kept) > VOLUME_RTOL * kept + 1e-6:
+        warnings.append(f"the parts' volumes add up to {plain.sum():.1f} mm³, the solid's is {kept:.1f} mm³")
+    for q, P in enumerate(part_M):
+        if P.is_empty():
+            continue
+        pieces = sorted((float(c.volume()) for c in P.decompose()), reverse=True)
+        if len(pieces) > 1:
+            warnings.append(f"part {q} falls into {len(pieces)} pieces ("
+                            + ", ".join(f"{v:.0f}" for v in pieces) + " mm³): print them separately or choose "
+                            "another number of parts")
+
+    # 5: joints and connectors
+    report(0.75, "joints")
+    joints = _joints(part_M, planes, plane_of_id)
+    conn_ids: set = set()
+    keepout: dict = {}
+    wall = _wall_probe(V, F, side)
+    for J in sorted(joints, key=lambda J: -J.area_mm2):
+        if J.note is not None:  # a second face of a pair: the pair's main joint carries the connectors
+            continue
+        if not connectors:
+            J.note = "connectors not asked for"
+            continue
+        _connect(J, part_M, planes, clearance, conn_ids, keepout, tree, skin_topo.face_normals, wall, warnings)
+    report(0.95, "faces")
+    Vs, Fs, labels, sides = [], [], [], []
+    base = 0
+    for q, P in enumerate(part_M):
+        if P.is_empty():
+            continue
+        Vq, Fq, oid, fid = _faces(P)
+        sd = np.full(len(Fq), SIDE_CUT, dtype=np.int8)
+        own = oid == rid
+        sd[own] = side[np.clip(fid[own], 0, len(side) - 1)]
+        sd[np.isin(oid, list(conn_ids))] = SIDE_CONNECTOR
+        Vs.append(Vq)
+        Fs.append(Fq + base)
+        base += len(Vq)
+        labels.append(np.full(len(Fq), q, dtype=np.int64))
+        sides.append(sd)
+    report(1.0, "done")
+    return SolidParts(
+        V=np.vstack(Vs) if Vs else np.zeros((0, 3)), F=np.vstack(Fs) if Fs else np.zeros((0, 3), np.int64),
+        labels=np.concatenate(labels) if labels else np.zeros(0, np.int64),
+        side=np.concatenate(sides) if sides else np.zeros(0, np.int8),
+        volumes_mm3=np.array([float(P.volume()) for P in part_M]), joints=sorted(joints, key=lambda J: J.parts),
+        warnings=warnings, plain_volumes_mm3=plain, solid_volume_mm3=solid_volume, planes=planes)

@@ -1,0 +1,1 @@
+"""Unfolding patches into true-scale sheet pieces: crossed springs, relaxation, overlap correction, darts and splits."""

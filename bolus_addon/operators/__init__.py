@@ -1,0 +1,1 @@
+"""The operators, one module per stage; each imports blender/ and core/ only."""
