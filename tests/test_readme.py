@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 #: the developers' page the README links to: venvs, tests, benchmarks, the module layout
 DEVELOPMENT = ROOT / "docs" / "development.md"
-#: the size the README aims at (issue 10: "under ~15 KB")
+#: the README stays short enough to read in one sitting (about 15 KB)
 MAX_README_BYTES = 16_000
 
 
@@ -98,14 +98,14 @@ def test_sidebar_names_are_the_panels(text):
     assert named and not named - ui - BLENDER_UI, sorted(named - ui - BLENDER_UI)
 
 
-def test_every_spec_operator_is_registered_and_what_is_not_there_yet_is_not_there(text):
-    """Every operator of SPEC's table is registered; a "Not there yet" paragraph (if any) names no
-    registered operator."""
-    spec = ROOT.parent / "shared" / "SPEC.md"
-    if not spec.exists():
-        pytest.skip(f"{spec} not available (../shared is expected beside the repository)")
-    in_spec = set(re.findall(r"^\| `(\w+)\(", spec.read_text(encoding="utf-8"), flags=re.M))
-    assert in_spec and in_spec <= registered_operators(), sorted(in_spec - registered_operators())
+def test_every_documented_operator_is_registered_and_what_is_not_there_yet_is_not_there(text):
+    """Every operator of docs/operators.md's table is registered and every registered one is there;
+    a "Not there yet" paragraph (if any) names no registered operator."""
+    ref = (ROOT / "docs" / "operators.md").read_text(encoding="utf-8")
+    table = ref[ref.index("| operator | leaves behind |"):]
+    table = table[:table.index("\n\n")]
+    documented = set(re.findall(r"^\| `(\w+)` \|", table, flags=re.M))
+    assert documented == registered_operators(), sorted(documented ^ registered_operators())
     if "**Not there yet:**" in text:
         para = text[text.index("**Not there yet:**"):]
         para = para[:para.index("\n\n")]
@@ -154,26 +154,29 @@ def test_repository_paths_exist(page):
     assert not missing
 
 
-def modules(folder: Path) -> set[str]:
-    """Stems of the .py files in `folder`: those git tracks in a checkout (a module still
-    being written is not part of the project yet), else every one there."""
+def tracked_modules() -> list[Path]:
+    """The add-on's .py files git tracks in a checkout (a module still being written is not part
+    of the project yet), else every one there."""
     try:
-        out = subprocess.run(["git", "ls-files", "--", "*.py"], cwd=folder, capture_output=True, text=True,
-                             check=True).stdout.split()
+        out = subprocess.run(["git", "ls-files", "--", "bolus_addon/*.py"], cwd=ROOT, capture_output=True,
+                             text=True, check=True).stdout.split()
     except (OSError, subprocess.CalledProcessError):
         out = []
-    names = [Path(f) for f in out if "/" not in f] or list(folder.glob("*.py"))
-    return {f.stem for f in names}
+    return [ROOT / f for f in out] or sorted((ROOT / "bolus_addon").rglob("*.py"))
 
 
-def test_layout_lists_every_module():
-    """The layout block (docs/development.md) names every module of the add-on and nothing that is gone."""
+def test_layout_lists_every_package_and_module():
+    """The package tree (docs/development.md) names every package and module of the add-on and
+    nothing that is gone."""
     text = DEVELOPMENT.read_text(encoding="utf-8")
     block = text[text.index("**Layout.**"):]
     listed = set(re.findall(r"\b(\w+)\.py\b", block))
-    for folder in (ROOT / "bolus_addon", ROOT / "bolus_addon" / "core"):
-        missing = modules(folder) - {"__init__"} - listed
-        assert not missing, f"{folder.name}: not in the layout {sorted(missing)}"
+    files = tracked_modules()
+    missing = sorted({f.stem for f in files if f.name != "__init__.py"} - listed)
+    assert not missing, f"not in the layout: {missing}"
+    packages = {f.parent.relative_to(ROOT / "bolus_addon").as_posix() for f in files if f.name == "__init__.py"}
+    unnamed = sorted(p for p in packages - {"."} if f"{p.rsplit('/', 1)[-1]}/" not in block)
+    assert not unnamed, f"packages not in the layout: {unnamed}"
     every = {p.stem for folder in ("bolus_addon", "scripts", "bench") for p in (ROOT / folder).rglob("*.py")}
     assert listed <= every, sorted(listed - every)
 

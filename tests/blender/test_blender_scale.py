@@ -18,7 +18,7 @@ def counted(monkeypatch):
     import sys
 
     calls = []  # the extension may be loaded under another package name: patch every copy
-    mods = [m for name, m in list(sys.modules.items()) if name.endswith("core.spectral")]
+    mods = [m for name, m in list(sys.modules.items()) if name.endswith("core.analysis.spectral")]
     for mod in mods:
         orig = mod.analyse
 
