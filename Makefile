@@ -5,6 +5,8 @@
 # make bench - benchmarks (printed, not asserted), their tables written to docs/benchmarks.md
 # make pictures - the README's step-by-step pictures in docs/img/ (scripts/readme_pictures.py)
 # make extension - the installable extension zip in dist/ (Blender's own builder, from bpy)
+# make house - packages, modules, import cycles, the longest modules and functions (scripts/house.py)
+# make operators-doc - docs/operators.md from the registered operators (scripts/operators_doc.py)
 # make extension-wheels - one zip per platform in dist/, with scipy, scikit-learn and manifold3d (cp311 and cp313) inside
 #
 # One venv per Blender, each from its pinned requirements file and stamped .installed:
@@ -39,7 +41,7 @@ PIP_INSTALL := -m pip install --quiet --disable-pip-version-check
 NO_PY313 := SKIPPED: the Blender 5.2.3 run (.venv52) -- no working Python 3.13 found (python3.13 on PATH, \
 pyenv's versions/3.13.*, /usr/local/bin, /usr/bin); install one or pass PYTHON313=/path/to/python3.13
 
-.PHONY: demo pictures test test-core fuzz bench extension extension-wheels clean
+.PHONY: demo pictures test test-core fuzz bench extension extension-wheels house operators-doc clean
 
 $(VENV)/.installed: requirements.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -112,6 +114,12 @@ extension: $(VENV)/.installed
 # scipy / scikit-learn / manifold3d, and runs segment and unfold through it (scripts/build_extension.py --check).
 extension-wheels: $(VENV)/.installed
 	$(PY) scripts/build_extension.py --out dist --check $(wildcard $(PY42) $(PY45) $(PY) $(PY52))
+
+house:
+	$(or $(wildcard $(PY)),$(PYTHON)) scripts/house.py
+
+operators-doc: $(VENV)/.installed
+	$(PY) scripts/operators_doc.py
 
 clean:
 	rm -rf out dist build .pytest_cache

@@ -17,7 +17,7 @@ and the *smooth* one after ``bolus.smooth_cuts()``.  Printed:
   Hausdorff);
 * the wall time of smooth_cuts;
 * a second ``bolus.smooth_cuts()`` on the result: the new vertices it adds (must be 0:
-  smooth_cuts is idempotent, issue 9) and whether the polygons and ``bolus_patch`` stay
+  smooth_cuts is idempotent) and whether the polygons and ``bolus_patch`` stay
   identical;
 * EL and EA of ``bolus.unfold()`` on both copies (SPEC measures, whole pattern and per
   patch): the seed's Table 4-5 says they should stay about equal or improve.

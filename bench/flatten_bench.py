@@ -17,7 +17,7 @@ Cases (every array in mm):
   chosen by bisection so that the disk has about the target number of vertices: ``ict nose 500``
   and ``ict nose 1000`` (ict_face_narrow.obj, cm -> mm; the 1000 one holds both nostril openings as
   holes), ``nefertiti nose 500`` (nefertiti.obj, mm: a scan, its raw angle sums are mostly noise);
-* concave spots that a sheet bridges (issue 13), regions of about 500 vertices on the ICT face
+* concave spots that a sheet bridges, regions of about 500 vertices on the ICT face
   around the most concave vertex (largest Moreton-Sequin normal curvature, `core.curvature`, on
   the 4 mm analysis copy) among the front-facing vertices within 10 mm (front view) of a point given
   relative to the nose tip: ``ict alar groove`` (the fold beside the nose, +22, -12 mm), ``ict
@@ -43,7 +43,7 @@ and of the improved surface, each measured against its own 3D triangles (SPEC EL
 ratio EL_after / EL_before (target <= 1.02; a pattern with overlaps is starred: its EL is a poor
 guide).
 
-Darting question (issue 13): on the nose and concave cases ``sheet_pieces(V, F, max_el=0.02)`` on the
+Darting question: on the nose and concave cases ``sheet_pieces(V, F, max_el=0.02)`` on the
 original and on each improved surface (1 mm, s = 3 mm): pieces, darts, splits, worst-piece and
 area-weighted EL / EA.
 

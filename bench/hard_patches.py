@@ -1,4 +1,4 @@
-"""The hard patches of issue 12 (noses with nostrils, a nostril pocket, a finger tip, a clean nose in 3).
+"""The hard patches for darts and splits (noses with nostrils, a nostril pocket, a finger tip, a clean nose in 3).
 
 Not part of the add-on: `bench/unfold_bench.py` benches them ("Hard patches: darts and
 splits") and other helpers test against the saved copies.  Run from the repository root:
@@ -235,7 +235,7 @@ def load_saved(folder) -> list[dict]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description="Make the hard patches of issue 12 and save them as .npz.")
+    ap = argparse.ArgumentParser(description="Make the hard patches for darts and splits and save them as .npz.")
     ap.add_argument("--write", metavar="DIR", required=True)
     ap.add_argument("--no-slim", dest="slim", action="store_false", help="do not time Blender's SLIM on them")
     ap.add_argument("--only", action="append", default=[])
@@ -269,7 +269,7 @@ def readme(path: Path, patches: list[dict], rows: list[dict], ours: dict | None 
     by = {r["patch"]: r for r in rows}
     ours = ours or {}
     lines = [
-        "Hard patches of issue 12 (bench/hard_patches.py; every array in mm).",
+        "Hard patches for darts and splits (bench/hard_patches.py; every array in mm).",
         "Each .npz: V (n,3) float64 mm, F (m,3) int64, name, how.  Load: bench/hard_patches.load_saved(dir).",
         "SLIM = Blender's uv.unwrap(method='MINIMUM_STRETCH', iterations=10/100, margin=0) on the patch cut to a",
         "disk (cutting.cut_to_disk), measured as unfold_bench does (true-area scale; EL, EA as SPEC; f/o = flipped",

@@ -412,7 +412,7 @@ def main(argv=None) -> int:
         print(f"\nPer part (the seed's Tables 6-4, 6-5)\n{t2.text()}")
     print("\nTraining\n" + "\n".join(tl) + "\n" + t3.text())
     notes = "\n".join(f"* {n}: {u}" for n, _, _, u in meshes)
-    md = (f"## Learned print segmentation (issue 15) (`bench/learned_print_bench.py`)\n\n"
+    md = (f"## Learned print segmentation (`bench/learned_print_bench.py`)\n\n"
           f"{run_line('learned_print_bench.py', argv)}\n\n"
           f"LEARNED (sub-graphs + the shipped stacked auto-encoder + affinity propagation, seed 6.4) against "
           f"GEOMETRIC (the same sub-graphs clustered by centroid distance only, the seed's Tables 6-4, 6-5) and "

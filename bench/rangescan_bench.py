@@ -1,4 +1,4 @@
-"""Range-scan benchmark (issue 14 point 2): every operator on a 17-piece scan of about 520k faces
+"""Range-scan benchmark: every operator on a 17-piece scan of about 520k faces
 finishes or refuses within a minute (printed, not asserted).
 
 Run from the repository root (bpy in .venv):
@@ -338,7 +338,7 @@ def _call(bpy, op: str, **kw):
 
 
 def _fingerprint(ob) -> str:
-    """sha256 of the source's geometry: coordinates and face corners (issue 14: "the source's data
+    """sha256 of the source's geometry: coordinates and face corners (the promise: "the source's data
     unchanged"; preview and segment add attributes by design, no operator may move or re-wire it)."""
     import hashlib
 
@@ -542,7 +542,7 @@ def main(argv=None) -> int:
     ap.add_argument("--keep", metavar="DIR", help="write the scan (.npz) and the outputs to DIR")
     ap.add_argument("--head1m", action="store_true",
                     help="instead of the scan: the whole bust subdivided to 1.12M faces (one closed piece), "
-                         "scenario whole only (issue 14's 1M-face case)")
+                         "scenario whole only (the 1M-face case)")
     args = ap.parse_args(argv)
     section = SECTION_HEAD if args.head1m else SECTION
     if args.head1m:

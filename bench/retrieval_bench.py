@@ -885,7 +885,7 @@ def report(payload: dict, argv) -> str:
         print(f"\nSEED model descriptors\n{t5.text()}")
     classes = "\n".join(f"* {c['class']}: `{c['file']}`, {c['vertices']} vertices, {c['units']}"
                         for c in payload["classes"])
-    return (f"## Retrieval from a photo (issue 16) (`bench/retrieval_bench.py`)\n\n"
+    return (f"## Retrieval from a photo (`bench/retrieval_bench.py`)\n\n"
             f"{run_line('retrieval_bench.py', argv)}\n\n"
             f"SEED (the seed's chapter 5: entropy edges, spectral contour, feature skeletons, ICP) against HU "
             f"(log Hu moment invariants of the object mask against each model's best of "

@@ -1,4 +1,4 @@
-"""Scale benchmark (issue 14 point 3): core steps on a head of 10k, 100k and 1M faces (printed, not asserted).
+"""Scale benchmark: core steps on a head of 10k, 100k and 1M faces (printed, not asserted).
 
 Run from the repository root (no Blender needed: core only):
 
@@ -34,7 +34,7 @@ the mesh is built once by the parent and handed over as a .npz file):
 Per (step, size): wall time of the call alone; peak = the child's VmHWM during the call (reset just
 before it through /proc/self/clear_refs) and + = that peak minus the RSS before the call (the input
 and the imports); growth = log-log slope of time against triangles, 10k->100k and 100k->1M;
-a slope above ``SUPERLINEAR`` is flagged. Yardstick (issue 14): on 1M faces preview + segment within
+a slope above ``SUPERLINEAR`` is flagged. Yardstick: on 1M faces preview + segment within
 60 s, peak memory under 2 GB (before: a 1.43M-face head took 37-40 s to preview, 104-106 s to segment).
 """
 from __future__ import annotations
@@ -253,7 +253,7 @@ def verdict(results: dict) -> str:
     return (f"1M yardstick: preview {p['seconds']:.1f} s + segment {s['seconds']:.1f} s = {tot:.1f} s "
             f"(target <= {TARGET_S:g} s: {'MET' if tot <= TARGET_S else 'NOT MET'}); largest peak of a 1M-size step "
             f"{mem:.0f} MB (target < {TARGET_MB:g} MB: {'MET' if mem < TARGET_MB else 'NOT MET'}). "
-            "Before (issue 14): 1.43M faces, 37-40 s preview, 104-106 s segment, +1.5-1.6 GB; 2026-12-02 05:10 (before "
+            "Before the coarse-to-fine eigenvectors and the reused preview: 1.43M faces, 37-40 s preview, 104-106 s segment, +1.5-1.6 GB; 2026-12-02 05:10 (before "
             "segment reused the preview and went coarse to fine): 1.12M faces, 20.1 s + 68.7 s = 88.8 s, peak 1712 MB.")
 
 

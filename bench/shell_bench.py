@@ -99,7 +99,7 @@ SKIN_GAP_MM = 0.05  # a thickness ray meets the skin again only this far from it
 BORDER_STEP_MM = 0.25  # border edges are sampled this finely for the distance to the border
 WORKER_TIMEOUT_S = 1800
 SPOTS = 3  # self-intersections: where the first few are (JSON)
-TARGET_S, TARGET_RES_MM = 30.0, 0.5  # issue 11: a 10 mm shell in under 30 s at 0.5 mm
+TARGET_S, TARGET_RES_MM = 30.0, 0.5  # the target: a 10 mm shell in under 30 s at 0.5 mm
 #: (key, nonmanifold_thickness_mode)
 SOLIDIFY_MODES = (("Solidify even", "EVEN"), ("Solidify constraints", "CONSTRAINTS"))
 REGIONS = ("example nose", "nefertiti face", "demosthenes face")

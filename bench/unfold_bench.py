@@ -48,7 +48,7 @@ fitted): EL, EA in %, flipped triangles (signed area <= 0) and overlapping trian
 Targets (reported, not asserted): ours default / the best SLIM figure (10 or 100
 iterations, true-area or EL-optimal scale, the lowest EL and the lowest EA taken
 separately): EL ratio <= 0.90, EA ratio <= 0.75; ours / SLIM-100: time ratio <= 2.0 on
-every patch (issue 9: "any region up to 50k triangles in at most twice the time of
+every patch (the yardstick: "any region up to 50k triangles in at most twice the time of
 SLIM-100").  Timing noise: the machine is shared (2 cores), so every
 timed call is the best of ``--repeat`` runs, except on patches above BIG_PATCH
 triangles (one run each: SLIM-100 alone takes minutes there).  ``hopeless`` is ours'
@@ -61,7 +61,7 @@ within 30 mm of the nose tip, the vertex of largest z, connected to it) segmente
 with ``spectral.segment(V, F, 3, smoothing_mm=3, rng=0)``, the chest wall of
 makehuman_chest_patch.obj (dm -> mm) segmented into 2 the same way, and the knee
 ring makehuman_knee_patch.obj (dm -> mm) as one patch (it gets cut to a disk).
-Hard and big patches (issue 9 item 5): the nostril patches (``nostril p<k>``: the ICT
+Hard and big patches: the nostril patches (``nostril p<k>``: the ICT
 nose region within 40 mm of the tip segmented into 3: two nostril pockets and the
 middle), the scanned face region ``nefertiti face`` (nefertiti.obj, mm: the faces
 within 150 mm of the nose tip, the vertex of largest z, connected to it, midpoint
@@ -70,7 +70,7 @@ to 150 mm, unfolded whole: it gets cut to a disk).  ``--quick`` leaves out the t
 big ones and the explicit integrator.
 Meshes come from the repository's ``assets/`` and ``tests/data/``.
 
-Hard patches: darts and splits (issue 12; ``--hard-only`` runs this section alone, ``--no-hard``
+Hard patches: darts and splits (``--hard-only`` runs this section alone, ``--no-hard``
 leaves it out): the patches of ``bench/hard_patches.py`` (nose disks of four heads cut into 3
 by the segment operator's core, a nostril pocket, a finger tip, the clean ICT nose in 3; made
 in-process or loaded with ``--hard-dir`` from its saved .npz).  Per patch: ours without
@@ -852,7 +852,7 @@ def markdown(rows: list[dict], args, argv) -> str:
     return "\n".join(out)
 
 
-# ----------------------------------------------------------------------------- hard patches (issue 12)
+# ----------------------------------------------------------------------------- hard patches
 
 HARD_HEADING = "## Hard patches: darts and splits (`bench/unfold_bench.py`)"
 HARD_MAX_EL = 0.02  # sheet_pieces(max_el=...), the issue's target: every piece EL <= 2 %
@@ -1308,7 +1308,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-ablation", dest="ablation", action="store_false",
                     help="leave out the ablation's stages (a') to (c)")
     ap.add_argument("--hard-only", action="store_true",
-                    help="run only the section 'Hard patches: darts and splits' (issue 12); with --markdown it "
+                    help="run only the section 'Hard patches: darts and splits'; with --markdown it "
                          "replaces that section of the file (or appends it)")
     ap.add_argument("--no-hard", dest="hard", action="store_false", help="leave out the hard patches' section")
     ap.add_argument("--hard-dir", metavar="DIR",

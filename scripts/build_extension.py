@@ -56,7 +56,7 @@ PYTHONS = {
 }
 BINARY = ("scipy", "scikit-learn", "manifold3d")
 PURE = ("joblib", "cloudpickle", "threadpoolctl", "narwhals")
-#: the pattern export's libraries (issue 12): DXF with ezdxf, PDF with fpdf2, and what they need, as
+#: the pattern export's libraries: DXF with ezdxf, PDF with fpdf2, and what they need, as
 #: py3-none-any wheels at the versions pinned in requirements.txt (ezdxf and fonttools also publish
 #: compiled wheels; their pure ones run the same, only slower on huge drawings).  Not Pillow: fpdf2
 #: draws vectors and text without it (tests/test_core_pattern_export.py checks that).

@@ -177,7 +177,7 @@ def test_layout_lists_every_package_and_module():
     packages = {f.parent.relative_to(ROOT / "bolus_addon").as_posix() for f in files if f.name == "__init__.py"}
     unnamed = sorted(p for p in packages - {"."} if f"{p.rsplit('/', 1)[-1]}/" not in block)
     assert not unnamed, f"packages not in the layout: {unnamed}"
-    every = {p.stem for folder in ("bolus_addon", "scripts", "bench") for p in (ROOT / folder).rglob("*.py")}
+    every = {p.stem for folder in ("bolus_addon", "scripts", "bench", "tests") for p in (ROOT / folder).rglob("*.py")}
     assert listed <= every, sorted(listed - every)
 
 

@@ -58,7 +58,7 @@ def test_three_methods_with_finite_totals(run):
 
 def test_markdown_section_and_tables(lpb, run):
     data, md = run
-    assert md.lstrip().startswith("## Learned print segmentation (issue 15)")
+    assert md.lstrip().startswith("## Learned print segmentation (`bench/learned_print_bench.py`)")
     assert "None of the benchmark's meshes is among them." in md
     for table in (lpb.summary_table(data["meshes"]), lpb.training_table(data["training"])):
         lines = table.markdown().splitlines()

@@ -283,7 +283,7 @@ def test_quick_run(rb, tmp_path):
         s = res["summary"]["all"]
         assert s["queries"] == 12 and 0 <= s["ADR"] <= 1 and 2.0 <= s["MR"] <= 11.0 and 0 <= s["LR"] <= 1
         assert len(res["models"]) == 12 and all(m["wall_s"] > 0 for m in res["models"])
-    assert text.lstrip().startswith("## Retrieval from a photo (issue 16)")
+    assert text.lstrip().startswith("## Retrieval from a photo (`bench/retrieval_bench.py`)")
     assert "Ranked first most often: SEED: " in text and "; HU: " in text
     for table in text.split("\n\n"):
         if table.startswith("|"):

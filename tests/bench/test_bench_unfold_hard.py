@@ -1,4 +1,4 @@
-"""The hard patches' section of the unfold benchmark (issue 12) and bench/hard_patches.py, without Blender.
+"""The hard patches' section of the unfold benchmark and bench/hard_patches.py, without Blender.
 
 docs/benchmarks.md "Hard patches: darts and splits" rests on this arithmetic: every piece
 measured on its own against its own 3D triangles, the worst piece and the area-weighted
