@@ -54,7 +54,7 @@ Then, measured here the same way for both (``measure_solid``):
   their source face's (n . n_source <= 0; the modifier copies a face attribute holding
   the source face index).
 
-Parts (when ``core.solid_parts.split_solid`` is there, else a printed note): the
+Parts (``core.solid.parts.split_solid``): the
 region's shell at ``PARTS_RESOLUTION`` (0.5 mm on the nose, 1.0 mm on the face crops; the
 finest one run when that one is not) is split into 3 parts along the ABcut print
 segmentation of its skin (``print_segment(skin, 3, rng=0)``) with peg/hole connectors
@@ -510,15 +510,6 @@ def run_worker(kind: str, arrays: dict, tmp: Path, keep: bool = False, **setting
 # ----------------------------------------------------------------------------- one region
 
 
-def have(module: str, name: str) -> bool:
-    import importlib
-
-    try:
-        return hasattr(importlib.import_module(f"bolus_addon.core.{module}"), name)
-    except ImportError:
-        return False
-
-
 def bench_region(region: dict, resolutions, tmp: Path, keep: bool = False, parts_resolution=None) -> dict:
     """Ours at each resolution (mm), both Solidify modes, then the parts of the shell at ``parts_resolution``
     (when it was run, else the finest) (module doc).  The child processes' arrays stay in ``tmp`` when ``keep``."""
@@ -558,10 +549,6 @@ def bench_region(region: dict, resolutions, tmp: Path, keep: bool = False, parts
             run = benchutil.error_row("method", key, exc)
         row["runs"].append(run)
         print_run(run, t)
-    if not have("solid_parts", "split_solid"):
-        row["parts"] = {"note": "core.solid_parts.split_solid is not there yet: parts not benchmarked"}
-        print(f"   parts: {row['parts']['note']}")
-        return row
     res = parts_resolution if parts_resolution in resolutions else min(resolutions)
     if res not in shells:
         row["parts"] = {"note": f"no {res:g} mm shell to split"}
