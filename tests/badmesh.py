@@ -1,4 +1,4 @@
-"""The bad-mesh corpus of issue 14 point 1, made by the tests (numpy + bpy, no files).
+"""The bad-mesh corpus, made by the tests (numpy + bpy, no files).
 
 Every case is a small skin-like surface (a bumpy 60 mm dome in a 1 unit = 1 mm scene, built
 from quads) with one kind of damage that planning systems and scanners hand over.

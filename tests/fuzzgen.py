@@ -1,4 +1,4 @@
-"""Hypothesis strategies for the fuzz tests (issue 14 point 2): random triangulated surfaces and
+"""Hypothesis strategies for the fuzz tests: random triangulated surfaces and
 random operator parameters.  numpy + scipy + hypothesis only (no bpy).
 
 A surface is drawn as a *spec*, a flat dict of plain numbers (kind, counts, noise, cut plane,

@@ -218,7 +218,7 @@ def graded_strip(length=200.0, width=20.0, coarse_cells=10, fine_cells=160, ny=4
 
 def degenerate_variants(V, F):
     """Broken copies of a mesh V (n,3), F (m,3) (triangle 0 must be interior-ish), for the
-    degenerate-input tests of every public core function (issue 10):
+    degenerate-input tests of every public core function:
     {name: (V', F', what the refusal must say, or None where the mesh is sound)}.
 
     coincident: a vertex duplicated onto another and used in a new triangle (zero area);

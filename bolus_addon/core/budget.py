@@ -1,4 +1,4 @@
-"""Time budget (issue 14 point 2): an operator finishes or refuses within a minute.
+"""Time budget: an operator finishes or refuses within a minute.
 
 A step whose work can run for minutes (unfold, improve flattenability, smooth cut lines, split
 into print parts on a whole scan; Make Bolus at a fine resolution) estimates its time from its
@@ -29,7 +29,7 @@ __all__ = ["BUDGET_S", "BUDGET_ENV", "COSTS", "budget_s", "estimate_s", "max_tri
            "check_budget", "check_grid_budget",
            "grid_resolution_for_budget", "shell_voxels"]
 
-#: seconds an operator may take before it must have refused (issue 14: "within a minute")
+#: seconds an operator may take before it must have refused ("within a minute")
 BUDGET_S = 60.0
 BUDGET_ENV = "BOLUS_TIME_BUDGET_S"
 #: step -> (T seconds, at M triangles, growth exponent p): t = T (m / M)^p per piece, fitted to

@@ -1,4 +1,4 @@
-"""Degenerate input to the public core functions of the analysis modules (issue 10 point 4):
+"""Degenerate input to the public core functions of the analysis modules:
 topology, saliency, piece_advice, remesh_maps.  Each broken mesh gives a BolusError
 that names the problem and where, or a sound (finite) result.  The unfolding, cut-line,
 pattern and print modules test theirs in their own test files."""

@@ -14,7 +14,7 @@ curve lying on the surface and re-triangulates the faces it crosses.  One idea p
 - this module: the passes over all borders, the per-border report rows, and the
   checks of a region before cutting.
 
-Idempotent (issue 9): a border is "already smooth", and left as it is, when its
+Idempotent: a border is "already smooth", and left as it is, when its
 vertices lie within a tenth of its mean edge of the curve (or plane section across the
 surface) fitted to them, or when the cuts we can make are valid but not measurably
 smoother.  A cut of a|c relabels faces near an a|b|c junction and so moves the end of

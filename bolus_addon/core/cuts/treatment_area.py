@@ -1,4 +1,4 @@
-"""The treatment area around a point: `treatment_area` (issue 11 point 0, SPEC `select_area`).
+"""The treatment area around a point: `treatment_area` (SPEC `select_area`).
 
 1. The surface point p nearest to the given centre (the 3D cursor), exactly
    (`geodesic.closest_point_on_mesh`); refused when the centre is farther from the

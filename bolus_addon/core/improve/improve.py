@@ -206,7 +206,7 @@ def gradient_steps(obj: SurfaceObjective, upper, *, max_iterations: int = GRADIE
 
 
 class ImproveJob:
-    """One improvement run, steppable (see the module doc; contract in the issue-13 notes).
+    """One improvement run, steppable (see the module doc).
 
     V (n,3) mm, F (m,3) consistently wound, the side the faces point to is "outward";
     max_gap_mm > 0; method in METHODS; rng an int seed or Generator (LPSO); smoothing_mm the

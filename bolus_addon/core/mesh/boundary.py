@@ -1,4 +1,4 @@
-"""Cut a patch to a topological disk before unfolding (issue 3, seed 4.5).
+"""Cut a patch to a topological disk before unfolding (seed 4.5).
 
 The seed's unfolding (4.5.1) grows a flat pattern triangle by triangle from a central
 triangle; that only closes up without tearing when the patch is a disk.  Patches that
@@ -325,7 +325,7 @@ def _path_length(V, path) -> float:
 
 
 def cut_to_disk(V, F) -> CutResult:
-    """Cut a patch to a topological disk along short edge paths (issue 3).
+    """Cut a patch to a topological disk along short edge paths.
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 """One drawing of the cut pattern, in paper millimetres, for the SVG, DXF and PDF writers.
 
-`pattern_drawing` lays the pattern out once (issue 12 point 4):
+`pattern_drawing` lays the pattern out once:
 
 * per piece its cut outline(s) (closed; outer loops counter-clockwise, holes clockwise,
   as seen from above), the seam allowance (`polygon_offset.offset_polygon`), the label

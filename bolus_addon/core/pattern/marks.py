@@ -9,7 +9,7 @@ source pair {sv[a], sv[b]} is an outline edge a second time.
   of pieces form one chain; both sides get the same number, so the user knows which
   edges to butt together;
 * within one piece it is a **dart** when the chain's two sides end at one pattern vertex
-  (the apex: the dart opened into a V, seed 4.1.2 / issue 12 point 1), else a **join**
+  (the apex: the dart opened into a V, seed 4.1.2), else a **join**
   (a cut that made a tube or a ring into a disk), numbered like the seams.
 
 Every mark also keeps where to draw it (`PatternMarks.UV`; for a seam the tick's place on

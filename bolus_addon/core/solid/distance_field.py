@@ -1,4 +1,4 @@
-"""Exact one-sided distance field of an open skin region, for the bolus shell (issue 11 point 1).
+"""Exact one-sided distance field of an open skin region, for the bolus shell.
 
 The shell is the set where
 

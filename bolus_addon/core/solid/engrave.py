@@ -1,4 +1,4 @@
-"""Engraved text on a bolus solid: the label, the part numbers and the L / R markers (issue 11 point 1).
+"""Engraved text on a bolus solid: the label, the part numbers and the L / R markers.
 
 Method.  A line of text (2D outlines at cap height 1, `TextOutline`) is placed in the tangent
 plane of the solid's outer face at a spot p (smooth normal n0) with the letters' up u; the text's

@@ -1,4 +1,4 @@
-"""The voxel part of the bolus shell (issue 11 point 1): manifold3d's level-set grid, the
+"""The voxel part of the bolus shell: manifold3d's level-set grid, the
 field of `distance_field.SkinDistance` on its two lattices (exact only where it decides the
 surface), and `Manifold.level_set` with a lookup callback.  Split from shell.py.
 

@@ -1,6 +1,6 @@
 """Closed solids: the one Manifold <-> arrays conversion and the checks of a printable solid.
 
-The volume work of issue 11 (shell, part cuts, pegs, engraving) uses the `manifold3d`
+The volume work (shell, part cuts, pegs, engraving) uses the `manifold3d`
 library (a small compiled wheel, numpy its only dependency): its meshes are manifold by
 construction and its booleans are exact and robust, so nothing here is hand-written
 marching cubes or boolean code.  This module is the only place that converts between

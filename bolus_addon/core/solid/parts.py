@@ -1,5 +1,5 @@
 """Closed solid print parts of a bolus with planar joints and connectors (seed 6.3-6.4.3,
-eqs. 6-38..6-40; issue 11 point 2).
+eqs. 6-38..6-40).
 
 `split_solid` takes the closed solid (a `shell.Shell`'s arrays), the skin region it was
 built on and a part label per skin triangle (the area-balanced cut of

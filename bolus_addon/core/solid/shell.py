@@ -1,5 +1,4 @@
-"""The bolus shell: a closed printable solid of chosen thickness on a skin region (seed 1.1;
-issue 11 point 1).
+"""The bolus shell: a closed printable solid of chosen thickness on a skin region (seed 1.1).
 
 Method.  The solid is the positive set of the one-sided distance field of
 `distance_field.SkinDistance` (f = min(sd - c, t - sd, r)): inner face at the clearance c,
@@ -298,14 +297,14 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     size = V.max(axis=0) - V.min(axis=0)
     area = 0.5 * float(np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum())
     read = len(F) + (0 if others is None else len(others[1]))  # triangles the operator reads and checks
-    if grid.points > MAX_GRID_POINTS:  # the resolution advised also fits the time budget (issue 14 point 2)
+    if grid.points > MAX_GRID_POINTS:  # the resolution advised also fits the time budget
         coarse = max(res * (grid.points / MAX_GRID_POINTS) ** (1 / 3),
                      grid_resolution_for_budget(area, t - c, res, read, time_limit_s)[2] or 0.0)
         raise BolusError(
             f"the region ({size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm) needs {grid.points / 1e6:.0f} million "
             f"grid points at {res:g} mm, more than the budget of {MAX_GRID_POINTS / 1e6:.0f} million: choose a "
             f"resolution of {coarse:.2g} mm or coarser, or a smaller region")
-    check_grid_budget(area, t - c, res, MIN_VOXELS_ACROSS,  # issue 14 point 2: refuse now, not after minutes
+    check_grid_budget(area, t - c, res, MIN_VOXELS_ACROSS,  # refuse now, not after minutes
                       f"a {t - c:g} mm wall on the region ({size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm, "
                       f"{area / 100:.0f} cm²)", triangles=read, limit=time_limit_s)
     skin = SkinDistance(V, F)

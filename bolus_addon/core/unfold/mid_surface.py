@@ -1,4 +1,4 @@
-"""Thick sheets: the mid-surface to unfold and the sheet-or-print advice (issue 12 point 3).
+"""Thick sheets: the mid-surface to unfold and the sheet-or-print advice.
 
 A sheet of thickness t laid on the skin bends about its middle: its skin side is
 compressed and its outer side stretched by about +-t / (2 R) where the skin bends to

@@ -9,7 +9,7 @@
   area springs IRLS-weighted as in the length refinement so that the refined pattern is
   kept), over the whole patch only if that fails (`correct_outline`).
 
-Budgets (issue 9; the seed gives none): every minimisation has an iteration budget and a
+Budgets (the seed gives none): every minimisation has an iteration budget and a
 stop test, the rounds stop when the defects stop going down, the best pattern is kept.
 On the scanned nose patches the whole-patch correction left 4 overlapping triangles (nose
 p1, p2); with the local one none, and nose p1 went from 2.7x to 1.7x the time of SLIM-100.
@@ -170,7 +170,7 @@ def correct_outline(UV, springs: Springs, topo: MeshTopology, rounds: int = OUTL
     the other, with the flip penalty raised so that no triangle turns over on the way.
     Constraints found in earlier rounds are kept.
 
-    UV (n,2).  Budget (our change, issue 9): at most ``rounds`` rounds of ``max_iter``
+    UV (n,2).  Budget (our change): at most ``rounds`` rounds of ``max_iter``
     L-BFGS iterations, stopping once the defects (flipped, crossing) have not improved for
     `OUTLINE_PATIENCE` rounds; the best pattern seen is returned.  progress(fraction, text)
     names the round.  Returns (UV, iterations, crossings left, the last penalty term, to
@@ -282,7 +282,7 @@ class _LocalProblem:
 
 def local_outline(UV, springs: Springs, topo: MeshTopology, rings: int = LOCAL_RINGS, rounds: int = LOCAL_ROUNDS,
                   max_iter: int = LOCAL_ITERS) -> tuple[np.ndarray, int, int]:
-    """Local overlap correction of the outline (our addition to 4.5.3, issue 9).
+    """Local overlap correction of the outline (our addition to 4.5.3).
 
     Only the vertices within ``rings`` edge rings of the crossing outline edges (and of the
     overlapping triangles) move; everything else stays where it is.  The energy is the one

@@ -10,7 +10,7 @@ FLV = 10 * 0.5 ** sum varpi, eq. 4-3) splits by sign into
 
 with the angle defect K(v) = 2 pi - theta(v) (below: diffused at the analysis scale).
 
-The sign decides the remedy (issue 12, garment pattern making uses the same rule):
+The sign decides the remedy (garment pattern making uses the same rule):
 
 * a deficit flattens by stretching the sheet outwards; a cut from the edge towards
   the point opens into a V (a dart) and smaller pieces carry less of it, so more /

@@ -1,4 +1,4 @@
-"""Darts and splits: a patch made into sheet pieces that meet a length-error target (issue 12 points 1, 2).
+"""Darts and splits: a patch made into sheet pieces that meet a length-error target.
 
 A patch whose pattern stretches more than ``max_el`` (EL, eq. 3-30) is refined.  The
 remedy follows the sign of the angle defect 2 pi - theta (eq. 4-1) diffused at the
@@ -37,7 +37,7 @@ stays as it is and the reason is recorded.  Limits: `MAX_PIECES` pieces per patc
 (`cutting.cut_to_disk`).  Every final piece gets one full unfolding (a piece refined after
 its full unfolding missed gets another one when it is final).
 
-Measured on the 17 hard patches of issue 12 (/tmp/h12_patches, bench/hard_patches.py;
+Measured on the 17 hard patches (bench/hard_patches.py;
 noses with nostrils, a nostril pocket, a finger tip; 122-2207 triangles) at max_el 2 %:
 all 17 meet EL <= 2 % and EA <= 3 % with 0 flipped / overlapping triangles, in 1-7
 pieces; one piece alone had EL 1.0-45 %.
@@ -69,7 +69,7 @@ __all__ = ["Dart", "Split", "SheetPieces", "sheet_pieces", "iter_sheet_pieces", 
 
 #: pieces per patch at most (splits stop there)
 MAX_PIECES = 8
-#: darts per piece at most (on the 17 hard patches of issue 12 no piece kept more than 3)
+#: darts per piece at most (on the 17 hard patches no piece kept more than 3)
 MAX_DARTS = 3
 #: EA target per EL target: the benchmark's target is EL <= 2 % with EA < 3 %, the same ratio
 #: for any max_el.  One-piece unfoldings have EA / EL 0.74 (60 degree cap) to 1.6 (nose
@@ -96,7 +96,7 @@ TRIAL_SLACK = 1.1
 #: excess in radians (where both are large they partly cancel, hence max(D, X), not D + X).
 #: Measured EL / max(D, X) of the full unfolding: cone (point deficit) 0.032, 60 and 30
 #: degree caps 0.011 and 0.010, 100 mm saddle 0.011, its half 0.0052; the 17 hard nose,
-#: pocket and finger patches of issue 12 0.0029-0.012 where one piece can meet 2 %, 0.035-0.069
+#: pocket and finger hard patches 0.0029-0.012 where one piece can meet 2 %, 0.035-0.069
 #: where it cannot (nostril pockets, finger tip).  So EL >= EL_PER_RAD max(D, X) (refine at
 #: once, no unfolding) and EL <= about EL_HIGH_PER_RAD max(D, X) (the full unfolding at once,
 #: no trial); in between the trial decides
@@ -558,7 +558,7 @@ class _Run:
         """The one full unfolding of a piece (vert_origin into V); its progress mapped into [lo, hi].
 
         Also a piece the refinement gave up on (stuck) gets the whole pipeline with its overlap
-        correction, the best chance of an overlap-free pattern (issue 12 point 1) where it misses
+        correction, the best chance of an overlap-free pattern where it misses
         max_el; the early decision before refining is what saves the time.  (A 43k-triangle face
         in one patch still ends with one stuck piece of 754 overlapping triangles, warned.)"""
         if p.full is None:

@@ -20,7 +20,7 @@ Hopeless patches (EL > `HOPELESS_EL` or EA > `HOPELESS_EA` after relaxation and
 refinement) skip the overlap correction and come back at once with
 ``Unfolding.hopeless`` and the figures (angle deficit / excess, eq. 4-1).
 
-Early decision (``unfold_patch(target_el=...)``, issue 12 point 2): after the cut, the
+Early decision (``unfold_patch(target_el=...)``): after the cut, the
 start and a short trial relaxation, a patch that cannot meet an EL target in one piece
 comes back hopeless before the refinement and the overlap correction, so that darts
 and splits (`sheet_pieces`) take over; with a target, an outline that crosses itself at
@@ -28,7 +28,7 @@ more than `TANGLED_CROSSINGS` points after the relaxation is also handed back (s
 instead of corrected.  Rules and calibration in `unfold_patch`.
 
 A patch that is not a topological disk is cut to one first (`cutting.cut_to_disk`).  `assemble` lays the
-patches out.  The names imported from here before the split (issue 10) are re-exported.
+patches out.  The names imported from here before the split are re-exported.
 """
 from __future__ import annotations
 
@@ -431,7 +431,7 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         should take over.  Otherwise the call goes on exactly as without target_el (the
         same pattern; EL may still end above the target).  Calibration of QUICK_GAIN
         (full-pipeline EL / trial EL) on 204 patches: caps, saddle, the bench's nose,
-        chest, knee and nostril patches, the issue-12 hard patches, and nose regions of
+        chest, knee and nostril patches, the hard patches, and nose regions of
         nefertiti, demosthenes (145 mm/unit), ICT and MakeHuman of 30-50 mm, native and
         subdivided, cut into 2-4 patches (21-17,000 triangles).  On the 170 the full
         pipeline does not flag hopeless (EL >= 0.1 %) the ratio is 0.55-0.95 (below 0.6
@@ -444,7 +444,7 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         over the same patches (a long strip carries much total curvature at little
         stretch), so they are reported, not used.  Cost: the cut, start and 25 iterations
         (~1/4-1/2 of a full call on small patches, 1/10-1/5 on large ones; measured on the
-        issue-12 hard patches 0.03-0.18 s CPU up to 2.2k triangles, 0.4-0.9 s at 4.7-6.4k,
+        hard patches 0.03-0.18 s CPU up to 2.2k triangles, 0.4-0.9 s at 4.7-6.4k,
         1.1-1.5 s at 11-12k, against 0.07-0.4, 1.1-5.6 and 5-14 s for the full call).
         method="explicit" has no stop test: its whole relaxation is the trial there.
         With a target, an outline that crosses itself at more than `TANGLED_CROSSINGS`
@@ -459,7 +459,7 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         triangles (4-10 after 1.3-1.7 s; 4-40 without it, at a lower EL); every bench
         patch it lays flat has 0-8.  Overlap share: at most 3.6 % on the 11 patches with
         flips or crossings after the relaxation that the correction laid flat (bench,
-        issue-12 and sweep patches); 15.5 % on a MakeHuman nose piece of 3964 triangles
+        hard and sweep patches); 15.5 % on a MakeHuman nose piece of 3964 triangles
         with one crossing, which it left with 760 overlapping after 11-14 s (patches
         hopeless by EL: 18-24 %).  Neither predicts failure for certain, so the default
         (no target) keeps the correction.
@@ -476,7 +476,7 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     finite number > 0.  Needle triangles (tiny
     angles, positive area) are unfolded like any other.
 
-    Budgets (issue 9; the stages of the seed are kept, their budgets are ours): the
+    Budgets (the stages of the seed are kept, their budgets are ours): the
     relaxation stops at `RELAX_ITERS` iterations or a relative energy decrease below
     `RELAX_TOL` over 5 iterations; a relaxation whose EL is still above `HOPELESS_FAR` x
     `HOPELESS_EL` after 50 iterations is stopped (a nostril pocket) and gets one short

@@ -108,7 +108,7 @@ def test_bad_smoothing_scale(bad):
 
 
 def test_analysis_key_changes_with_anything_the_analysis_depends_on():
-    """segment reuses a preview only under an equal key (issue 14 point 3): the key follows
+    """segment reuses a preview only under an equal key: the key follows
     the exact coordinates, the triangles and the smoothing, not the array types."""
     from bolus_addon.core.analysis.saliency import analysis_key
 

@@ -162,7 +162,7 @@ def test_gmm_clustering_also_gives_connected_patches():
         assert len(np.unique(comp[seg.face_labels == p])) == 1
 
 
-# ------------------------------------------------------------ the one clustering step (issue 10)
+# ------------------------------------------------------------ the one clustering step
 from meshgen import degenerate_variants  # noqa: E402
 
 from bolus_addon.core.analysis import clustering  # noqa: E402
@@ -251,7 +251,7 @@ def test_gaussian_weights_clip_and_regular_mesh():
     assert gaussian_weights(np.zeros(0)).shape == (0,)
 
 
-# ---------------------------------------------------------------- issue 14 point 3: scale
+# ---------------------------------------------------------------- scale
 
 
 def _matched_share(a, b, weights=None):

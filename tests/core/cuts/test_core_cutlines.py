@@ -1,4 +1,4 @@
-"""Core tests of the smooth cut lines (core.cutlines, seed 4.1.2; issue 4)."""
+"""Core tests of the smooth cut lines (core.cutlines, seed 4.1.2)."""
 from __future__ import annotations
 
 import numpy as np
@@ -371,7 +371,7 @@ def test_refuses_patches_without_a_common_border():
         smooth_cuts(V, F, labels)
 
 
-# ------------------------------------------------------------------ idempotent (issue 9, item 7)
+# ------------------------------------------------------------------ idempotent
 def assert_second_run_changes_nothing(V, F, labels):
     """Run smooth_cuts on (V, F, labels) and again on its result: the second run must change nothing."""
     first = smooth_cuts(V, F, labels)
@@ -464,7 +464,7 @@ def test_border_already_on_mesh_edges_is_left_alone():
 
 @pytest.mark.parametrize("patches", [4, 5])
 def test_second_run_changes_nothing_on_the_demo_nose(patches):
-    """Issue 9's repro: the demo's nose region; a second run re-cut 3 of 9 (4 patches) and 9 of 9
+    """The demo's nose region; a second run re-cut 3 of 9 (4 patches) and 9 of 9
     (5 patches) borders and added 34 and 98 vertices."""
     V, F, labels = nose_region(patches)
     assert len(np.unique(labels[labels >= 0])) == patches

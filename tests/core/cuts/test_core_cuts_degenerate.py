@@ -1,4 +1,4 @@
-"""Degenerate input to the cut-line and cutting core (issue 10 point 4): coincident vertices,
+"""Degenerate input to the cut-line and cutting core: coincident vertices,
 zero-area and needle triangles, NaN/inf, non-manifold edges.  Each public function either
 raises BolusError naming the problem and where, or gives a sound (finite, documented) result."""
 from __future__ import annotations

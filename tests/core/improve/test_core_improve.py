@@ -1,4 +1,4 @@
-"""Core of `bolus.improve_flattenability` (issue 13): the objective of eq. 4-21
+"""Core of `bolus.improve_flattenability`: the objective of eq. 4-21
 (`core/improve_objective.py`) and the driver with its gradient method (`core/improve.py`)."""
 import numpy as np
 import pytest

@@ -1,5 +1,5 @@
-"""Local node selection (Algorithm 4-1) and L-PSO (Algorithm 4-2) on the objective of eq. 4-21
-(issue 13 point 2): the selection rules on meshes whose angle-sum signs are known, the
+"""Local node selection (Algorithm 4-1) and L-PSO (Algorithm 4-2) on the objective of eq. 4-21:
+the selection rules on meshes whose angle-sum signs are known, the
 bounds, fixed vertices, never worse, seeded, the T-doubling, a real drop of J, and
 degenerate / bad input."""
 import numpy as np

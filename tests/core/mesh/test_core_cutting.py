@@ -1,4 +1,4 @@
-"""Issue 3: patches that are not disks are cut to a disk along short paths."""
+"""Patches that are not disks are cut to a disk along short paths."""
 import numpy as np
 import pytest
 import scipy.sparse as sp

@@ -107,7 +107,7 @@ def test_bad_arrays_raise_value_error(V, F, msg):
         MeshTopology(V, F)
 
 
-# ---------------------------------------------------------------- check_mesh / submesh (issue 10)
+# ---------------------------------------------------------------- check_mesh / submesh
 def _square():
     V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
     F = np.array([[0, 1, 2], [0, 2, 3]])

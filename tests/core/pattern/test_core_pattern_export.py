@@ -1,4 +1,4 @@
-"""Cutter-ready pattern export (issue 12 point 4): one drawing, written as SVG, DXF and PDF."""
+"""Cutter-ready pattern export: one drawing, written as SVG, DXF and PDF."""
 import os
 from pathlib import Path
 import shutil

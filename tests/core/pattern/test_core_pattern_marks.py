@@ -1,4 +1,4 @@
-"""Matching marks of a cut pattern (issue 12 point 4): seams between pieces, joins and darts within one."""
+"""Matching marks of a cut pattern: seams between pieces, joins and darts within one."""
 import numpy as np
 import pytest
 from meshgen import degenerate_variants, grid

@@ -1,4 +1,4 @@
-"""core.pattern_mesh: the unfold/export operators' numbers without Blender (issue 10 point 1)."""
+"""core.pattern_mesh: the unfold/export operators' numbers without Blender."""
 import json
 
 import numpy as np

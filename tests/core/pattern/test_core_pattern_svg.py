@@ -345,7 +345,7 @@ def test_svg_bad_input():
         svg_outline_paths("<svg")
 
 
-# ------------------------------------------------------------------ degenerate input (issue 10 point 4)
+# ------------------------------------------------------------------ degenerate input
 def test_outline_with_coincident_vertices_and_needles_is_sound():
     """Collapsed and needle triangles do not change the outline: its area is the pattern's."""
     UV, F = grid_with_hole()

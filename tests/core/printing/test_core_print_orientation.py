@@ -225,7 +225,7 @@ def test_bad_input_is_refused():
         orient(V, F[:, :2])
 
 
-# ------------------------------------------------------------ degenerate input (issue 10)
+# ------------------------------------------------------------ degenerate input
 from meshgen import degenerate_variants  # noqa: E402
 
 from bolus_addon.core.printing.measures import PrintTerms, open_surface_note  # noqa: E402
@@ -338,7 +338,7 @@ def test_open_surface_note_and_terms_near_match_exact():
 
 
 def test_search_finds_the_narrow_slivers_of_scanned_face_parts():
-    """Regression (issue 10, honest print bench): on two ABcut parts of the ICT face the best
+    """Regression (honest print bench): on two ABcut parts of the ICT face the best
     directions lie in slivers about 0.3 deg wide; a 160-point first cap shrinking 4x missed them
     by 1.8 % and 4.7 % against the bench's independent reference (whose values are pinned here)."""
     from bolus_addon.core.printing.segmentation import print_segment

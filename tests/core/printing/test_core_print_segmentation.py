@@ -109,7 +109,7 @@ def test_bad_input_is_refused():
         part_stats(V, F, np.zeros(3, dtype=int))
 
 
-# ------------------------------------------------------------ polygons, table, degenerate input (issue 10)
+# ------------------------------------------------------------ polygons, table, degenerate input
 from meshgen import degenerate_variants  # noqa: E402
 
 

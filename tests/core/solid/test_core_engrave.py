@@ -1,4 +1,4 @@
-"""Engraved labels and L / R markers (core/engrave.py; issue 11 point 1)."""
+"""Engraved labels and L / R markers (core/engrave.py)."""
 import numpy as np
 import pytest
 
@@ -290,7 +290,7 @@ def test_bad_arguments():
         engrave_text(V, F[:-1], side[:-1], LO)
 
 
-# ---------------------------------------------------------------- degenerate input (issue 10 point 4)
+# ---------------------------------------------------------------- degenerate input
 
 BOX = box((60.0, 40.0, 8.0), n=6)
 CASES = degenerate_variants(*BOX)

@@ -1,4 +1,4 @@
-"""core.shell: the bolus solid on a skin region (issue 11 point 1).  bpy-free; coarse
+"""core.shell: the bolus solid on a skin region.  bpy-free; coarse
 resolutions (1.5-2 mm) keep the file fast -- speed figures live in bench/."""
 import array
 import math

@@ -1,4 +1,4 @@
-"""core.solid: the Manifold <-> arrays conversion, SPEC closedness and ray thickness (issue 11)."""
+"""core.solid: the Manifold <-> arrays conversion, SPEC closedness and ray thickness."""
 import numpy as np
 import pytest
 

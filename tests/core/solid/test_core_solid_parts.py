@@ -1,5 +1,5 @@
 """Solid print parts with SVM common planes and connectors (core.solid_parts, core.connectors;
-seed 6.3-6.4.3, eqs. 6-38..6-40; issue 11 point 2).
+seed 6.3-6.4.3, eqs. 6-38..6-40).
 
 Test solids are built with manifold3d directly: a thick hemispherical cap (sphere(70) -
 sphere(60) above z = 0) on the skin of the inner sphere, and a strongly curved C-shaped

@@ -1,4 +1,4 @@
-"""Mid-surface of a thick sheet, region size check and sheet-or-print advice (issue 12 point 3)."""
+"""Mid-surface of a thick sheet, region size check and sheet-or-print advice."""
 import numpy as np
 import pytest
 
@@ -49,7 +49,7 @@ def ring_width(u, ring, k):
 
 @pytest.mark.parametrize("t", [0.0, 10.0])
 def test_cylinder_mid_surface_pattern_has_width_2pi_r_plus_half_t(t):
-    """Issue 12 test: the pattern of the mid-surface of a tube of radius R is 2 pi (R + t/2) wide."""
+    """The pattern of the mid-surface of a tube of radius R is 2 pi (R + t/2) wide."""
     R, na = 30.0, 128
     V, F, ring = tube(R, na=na)
     ms = mid_surface(V, F, t)

@@ -216,7 +216,7 @@ def test_flattened_cut_knee_is_clean_until_a_vertex_is_pushed_over():
     assert not s["ok"] and s["flipped_faces"] > 0 and s["overlapping_faces"] >= s["flipped_faces"]
 
 
-# ------------------------------------------------------------ degenerate input (issue 10 point 4)
+# ------------------------------------------------------------ degenerate input
 def coincident_pattern():
     """A flat 4 x 4 grid whose vertices 6 and 7 coincide: two collapsed (zero-area) triangles."""
     UV, F = flat(4, 4, 40.0)

@@ -1,4 +1,4 @@
-"""Darts and splits (core/sheet_pieces.py, issue 12 points 1, 2): a cone gets a dart, a
+"""Darts and splits (core/sheet_pieces.py): a cone gets a dart, a
 saddle a split, a developable cylinder nothing; every triangle in exactly one piece; the
 target, the limits and bad input."""
 import numpy as np

@@ -107,7 +107,7 @@ def test_bad_patches():
 
 
 def test_hopeless_patch_is_flagged_with_its_figures():
-    # issue 9 item 4/5: a 120 degree cap of 10 mm radius cannot lie flat in one piece
+    # a 120 degree cap of 10 mm radius cannot lie flat in one piece
     V, F = spherical_cap(10.0, 120.0, 3)
     u = unfold_patch(V, F)
     assert u.hopeless
@@ -203,7 +203,7 @@ def test_coincident_vertices_are_refused_by_name():
             call()
 
 
-# Stage switches (issue 10 point 5): what each stage of unfold_patch earns on the 60 degree cap
+# Stage switches: what each stage of unfold_patch earns on the 60 degree cap
 # spherical_cap(100, 60, 4) (1284 triangles), measured on 2026-12-01 before the module split:
 #   start only (relax=False, conformal map)          EL 7.14 %  EA 14.33 %
 #   springs without crossed / disturbing, no refine  EL 3.95 %  EA 4.45 %
@@ -271,7 +271,7 @@ def test_without_relaxation_the_start_comes_back_unchanged(cap_stages):
 
 
 def test_old_names_are_re_exported_from_their_homes():
-    """Importers of bolus_addon.core.unfold.unfold keep working after the split (issue 10): every
+    """Importers of bolus_addon.core.unfold.unfold keep working after the split: every
     name in unfold.__all__ is the object of the module that is its one home."""
     import bolus_addon.core.unfold.unfold as unfold
     from bolus_addon.core.unfold import assemble, initial_unfolding, measures, refine, relax, springs

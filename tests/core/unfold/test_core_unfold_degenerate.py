@@ -1,4 +1,4 @@
-"""Degenerate input to every public function of the unfolding core (issue 10 point 4):
+"""Degenerate input to every public function of the unfolding core:
 coincident vertices, collinear (zero-area) and needle triangles, NaN/inf, non-manifold
 edges, vertices in no triangle, bad positions.  Each gives a `BolusError` naming the
 problem and where, or a sound (finite, documented) result."""

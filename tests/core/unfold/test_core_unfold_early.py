@@ -1,4 +1,4 @@
-"""The early decision of `unfold_patch(target_el=...)` (issue 12 point 2): a patch that cannot
+"""The early decision of `unfold_patch(target_el=...)`: a patch that cannot
 meet the EL target in one piece is flagged hopeless after the cheap stages (cut, conformal
 start, a short relaxation), before the refinement and the overlap correction; a patch that
 can is unfolded exactly as without the target."""

@@ -1,5 +1,5 @@
 """The fast paths of the unfolding's inner loop give the same numbers as the plain ones
-(issue 12 point 2: speed on hard patches without changing any pattern)."""
+(speed on hard patches without changing any pattern)."""
 import numpy as np
 import pytest
 import scipy.sparse as sp
