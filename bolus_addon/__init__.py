@@ -12,13 +12,13 @@ def register():
     import bpy
 
     from . import panel
-    from .blender import operator_base, properties
+    from .blender import properties
     from .operators import analysis, area, cuts, improve, pattern, printing, retrieval, solid, unfold
 
     global _classes
-    _classes = (properties.BolusSettings, *operator_base.classes, *area.classes, *analysis.classes, *cuts.classes,
-                *improve.classes, *unfold.classes, *pattern.classes, *printing.classes, *solid.classes,
-                *retrieval.classes, *panel.classes)
+    _classes = (properties.BolusSettings, *area.classes, *analysis.classes, *cuts.classes, *improve.classes,
+                *unfold.classes, *pattern.classes, *printing.classes, *solid.classes, *retrieval.classes,
+                *panel.classes)
     for cls in _classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.bolus = bpy.props.PointerProperty(type=properties.BolusSettings)

@@ -12,9 +12,9 @@ Other modules of the Blender layer call these helpers instead of testing
 - `version`, `at_least`: the running Blender as a tuple, for anything new.
 
 Not a switch here because it is solved the same way on every version: the corners of
-faces that ``smooth_cuts`` creates are interpolated by mesh_io itself with the core's
+faces that ``smooth_cuts`` creates are interpolated by mesh_cuts itself with the core's
 barycentric weights (``BMLoop/BMFace.copy_from_face_interp`` raise SystemError in 4.2.0).
-numpy 1.26 versus 2.x is the core's business: `core.geometry2d` and no removed calls.
+numpy 1.26 versus 2.x is the core's business: `core.mesh.geometry2d` and no removed calls.
 """
 from __future__ import annotations
 

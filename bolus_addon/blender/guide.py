@@ -7,13 +7,33 @@ tooltip of a greyed button, and the text of the RuntimeError a script gets); the
 shows the same sentence as a label under the greyed step (a new user does not hover over
 a greyed button).
 
-Cheap by design (polls run at every redraw): names, attribute and custom-property look-ups,
-no mesh data read.  The operator modules are imported inside the functions: they import
-this module for their polls.
+Cheap by design (polls run at every redraw): names, attribute and custom-property look-ups
+(`objects`), no mesh data read.  `next_step` tells the panel which step comes next.
 """
 from __future__ import annotations
 
-from .operator_base import ATTR_FLATTENABILITY, ATTR_PATCH
+import bpy
+
+from . import mesh_io
+from .objects import (
+    ATTR_FLATTENABILITY,
+    ATTR_PATCH,
+    ATTR_PRINT_PART,
+    IMPROVED_SUFFIX,
+    PROP_CUT_TABLE,
+    PROP_PART_INDEX,
+    PROP_PART_SOURCE,
+    PROP_PATCH_TABLE,
+    PROP_SOURCE,
+    bolus_for,
+    is_bolus_object,
+    is_improved_object,
+    is_pattern_object,
+    part_objects,
+    parts_source_name,
+    pattern_of,
+    pattern_source_name,
+)
 
 
 def needs_mesh(context) -> str | None:
@@ -26,24 +46,12 @@ def needs_mesh(context) -> str | None:
     return None
 
 
-def is_pattern(obj) -> bool:
-    from ..operators.unfold import is_pattern_object  # noqa: PLC0415
-
-    return is_pattern_object(obj)
-
-
-def pattern_source_name(obj) -> str:
-    from ..operators.unfold import PATTERN_SUFFIX  # noqa: PLC0415
-
-    return obj.get("bolus_source", obj.name.removesuffix(PATTERN_SUFFIX))
-
-
 def needs_not_pattern(verb: str):
     """A need: the active object is not a pattern made by Unfold (``verb``: what to do to the source)."""
 
     def need(context) -> str | None:
         obj = context.active_object
-        if is_pattern(obj):
+        if is_pattern_object(obj):
             return f"'{obj.name}' is a pattern made by Unfold: select its source '{pattern_source_name(obj)}' and {verb}"
         return None
 
@@ -61,22 +69,6 @@ def needs_patches(context) -> str | None:
     return None
 
 
-def pattern_of(obj):
-    """The pattern to export for obj: obj itself (a pattern) or its ``<name>_pattern``; else None."""
-    from ..operators.unfold import ATTR_SOURCE_FACE, PATTERN_SUFFIX  # noqa: PLC0415
-
-    import bpy  # noqa: PLC0415
-
-    if obj is None or obj.type != "MESH":
-        return None
-    if ATTR_SOURCE_FACE in obj.data.attributes:
-        return obj
-    pat = bpy.data.objects.get(obj.name + PATTERN_SUFFIX)
-    if pat is not None and pat.type == "MESH" and ATTR_SOURCE_FACE in pat.data.attributes:
-        return pat
-    return None
-
-
 def needs_pattern(context) -> str | None:
     """Export Pattern: the active object is a pattern, or a skin that has one."""
     why = needs_mesh(context)
@@ -88,49 +80,27 @@ def needs_pattern(context) -> str | None:
     return None
 
 
-def is_bolus(obj) -> bool:
-    from ..operators.solid import is_bolus_object  # noqa: PLC0415
-
-    return is_bolus_object(obj)
-
-
-def is_improved(obj) -> bool:
-    from ..operators.improve import is_improved_object  # noqa: PLC0415
-
-    return is_improved_object(obj)
-
-
 def needs_not_bolus(context) -> str | None:
     """Make Bolus: the active object is not itself a bolus."""
     obj = context.active_object
-    if is_bolus(obj):
+    if is_bolus_object(obj):
         return (f"'{obj.name}' is a bolus made by Make Bolus: select the skin it was made on "
-                f"('{obj.get('bolus_source', '?')}')")
+                f"('{obj.get(PROP_SOURCE, '?')}')")
     return None
 
 
 def needs_not_improved(context) -> str | None:
     """Improve Flattenability: the active object is not an improved surface already."""
     obj = context.active_object
-    if is_improved(obj):
-        from ..operators.improve import IMPROVED_SUFFIX  # noqa: PLC0415
-
-        src = obj.get("bolus_source", obj.name.removesuffix(IMPROVED_SUFFIX))
+    if is_improved_object(obj):
+        src = obj.get(PROP_SOURCE, obj.name.removesuffix(IMPROVED_SUFFIX))
         return (f"'{obj.name}' was made by Improve Flattenability: select its source '{src}' "
                 "and improve that (with another max gap or method)")
     return None
 
 
-def parts_source_name(obj) -> str:
-    """The name whose ``<name>_part_<i>`` objects Export Print Parts writes (as its run finds them)."""
-    own = is_bolus(obj) or is_improved(obj)  # their 'bolus_source' names the skin, their parts are their own
-    return obj.name if own else obj.get("bolus_source", obj.name)
-
-
 def needs_parts(context) -> str | None:
     """Export Print Parts: the oriented part objects exist."""
-    from ..operators.printing import part_objects  # noqa: PLC0415
-
     why = needs_mesh(context)
     if why:
         return why
@@ -138,23 +108,6 @@ def needs_parts(context) -> str | None:
     if not part_objects(source):
         return f"'{source}' has no print parts yet: run Orient Print Parts first"
     return None
-
-
-def bolus_for(obj):
-    """The bolus solid of obj: obj (a bolus), the bolus a part came from, or the skin's ``<name>_bolus``."""
-    import bpy  # noqa: PLC0415
-
-    from ..operators.solid import BOLUS_SUFFIX  # noqa: PLC0415
-
-    if obj is None:
-        return None
-    if is_bolus(obj):
-        return obj
-    src = bpy.data.objects.get(obj.get("bolus_source", ""))
-    if is_bolus(src):
-        return src
-    b = bpy.data.objects.get(obj.name + BOLUS_SUFFIX)
-    return b if is_bolus(b) else None
 
 
 def needs_bolus_selected(context) -> str | None:
@@ -166,10 +119,10 @@ def needs_bolus_selected(context) -> str | None:
     if why:
         return why
     obj = context.active_object
-    if is_bolus(obj):
+    if is_bolus_object(obj):
         return None
     b = bolus_for(obj)
-    if b is not None and obj.get("bolus_source") == b.name:
+    if b is not None and obj.get(PROP_SOURCE) == b.name:
         return f"'{obj.name}' is a print part: select the bolus '{b.name}' to split it again"
     if b is not None:
         return f"Select the bolus '{b.name}' (made by Make Bolus) to split it into print parts"
@@ -181,13 +134,13 @@ def made_object(obj) -> tuple[str, str] | None:
     (an improved surface is a skin: Unfold and Make Bolus take it)."""
     if obj is None or obj.type != "MESH":
         return None
-    if is_pattern(obj):
+    if is_pattern_object(obj):
         return "a pattern made by Unfold", pattern_source_name(obj)
-    if is_bolus(obj):
-        return "a bolus made by Make Bolus", obj.get("bolus_source", "?")
-    if "bolus_part" in obj:  # a print part (orient_parts)
+    if is_bolus_object(obj):
+        return "a bolus made by Make Bolus", obj.get(PROP_SOURCE, "?")
+    if PROP_PART_INDEX in obj:  # a print part (orient_parts)
         b = bolus_for(obj)
-        return "a print part", (b.get("bolus_source", "?") if b is not None else obj.get("bolus_source", "?"))
+        return "a print part", (b.get(PROP_SOURCE, "?") if b is not None else obj.get(PROP_SOURCE, "?"))
     return None
 
 
@@ -235,3 +188,45 @@ def poll_for(cls, context) -> bool:
         cls.poll_message_set(why)
         return False
     return True
+
+
+def smooth_cuts_done(obj) -> bool:
+    """Smooth Cut Lines has run on obj (on an improved surface: on its source), or there is no
+    border to smooth (one patch)."""
+    if is_improved_object(obj):
+        obj = bpy.data.objects.get(obj.get(PROP_SOURCE, ""), obj)
+    if PROP_CUT_TABLE in obj:
+        return True
+    t = mesh_io.json_prop(obj, PROP_PATCH_TABLE)
+    return isinstance(t, dict) and (bool(t.get("smooth_cuts")) or len(t.get("patches", [])) <= 1)
+
+
+def next_step(context) -> tuple[str, set[str]]:
+    """(what to do next, the operators to highlight) from what the active object has."""
+    obj = context.active_object
+    if needs_mesh(context):
+        return "Select the skin surface mesh (an STL imported in mm)", set()
+    if is_pattern_object(obj):
+        return "6a Export the pattern (SVG, DXF or PDF)", {"bolus.export_pattern"}
+    if is_bolus_object(obj):
+        if ATTR_PRINT_PART not in obj.data.attributes:
+            return "6b Split into Print Parts", {"bolus.print_segment"}
+        if not part_objects(obj.name):
+            return "6b Orient Print Parts", {"bolus.orient_parts"}
+        return "6b Export Print Parts (STL)", {"bolus.export_parts"}
+    b = bolus_for(obj)
+    if b is not None and obj.get(PROP_PART_SOURCE) == b.name:  # a print part
+        return "6b Export Print Parts (STL)", {"bolus.export_parts"}
+    if pattern_of(obj) is not None:
+        return "6a Export the pattern (or 6b Make Bolus)", {"bolus.export_pattern"}
+    if b is not None:
+        return f"6b Select '{b.name}', then Split into Print Parts", set()
+    if has_patches(obj):
+        if smooth_cuts_done(obj):
+            return "6a Unfold Patches or 6b Make Bolus", {"bolus.unfold", "bolus.make_shell"}
+        return "4 Smooth Cut Lines", {"bolus.smooth_cuts"}
+    if has_preview(obj):
+        return "3 Segment into Patches", {"bolus.segment"}
+    if obj.mode == "EDIT" and obj.data.total_face_sel > 0:
+        return "2 Flattenability Preview of the selected faces", {"bolus.saliency_preview"}
+    return "1 Select Treatment Area (or select faces in Edit Mode)", {"bolus.select_area"}

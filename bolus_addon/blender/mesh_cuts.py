@@ -1,7 +1,7 @@
 """Writing a cut into a Blender mesh: `apply_cuts` (BMesh), the selection and hidden
 state carried through it, and corner data (UV maps, colours) interpolated onto the new
 faces.  The numeric maps (label ranges, old-edge lookup, corner weights) are in
-`core.remesh_maps`; this module only reads and writes Blender data.
+`core.mesh.remesh_maps`; this module only reads and writes Blender data.
 """
 from __future__ import annotations
 
@@ -10,13 +10,14 @@ import numpy as np
 
 from ..core.errors import BolusError
 from ..core.mesh.remesh_maps import corner_weights, label_range, pair_index
-from .mesh_io import Region, get_array, loop_edges_and_polygons, read_face_labels, write_attribute
+from .mesh_io import get_array, loop_edges_and_polygons, read_face_labels, write_attribute
+from .mesh_region import Region
 
 __all__ = ["apply_cuts"]
 
 
 def apply_cuts(me: bpy.types.Mesh, region: Region, res, label_attr: str) -> np.ndarray:
-    """Write a `core.cutlines.SmoothCutResult` into the mesh (object mode); returns polygon labels.
+    """Write a `core.cuts.cutlines.SmoothCutResult` into the mesh (object mode); returns polygon labels.
 
     Polygons whose triangles were split (or got different labels) are replaced by the
     result's triangles; every other polygon keeps its vertices, corners and data.  New
@@ -229,7 +230,7 @@ def _interpolate_corners(me, region, res, new_faces, created_index, tri_loops, c
 
     A corner at result vertex j of a face lying in input triangle t gets
     sum_c w_c * value(corner c of t), w = j's barycentric weights on t's corners
-    (`core.remesh_maps.corner_weights`); integer and boolean attributes take the value
+    (`core.mesh.remesh_maps.corner_weights`); integer and boolean attributes take the value
     of the corner with the largest weight.
     """
     if not corner_data or len(new_faces) == 0:

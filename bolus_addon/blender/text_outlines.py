@@ -1,8 +1,8 @@
-"""Text outlines from Blender's built-in font, for the engraved labels (issue 11 point 1).
+"""Text outlines from Blender's built-in font, for the engraved labels (`blender.labels`).
 
-`text_outline(text)` gives a `core.engrave.TextOutline`: a temporary FONT curve holding the
+`text_outline(text)` gives a `core.solid.engrave.TextOutline`: a temporary FONT curve holding the
 text is linked to the scene, evaluated to a mesh (its filled glyphs), and the boundary loops of
-those triangles (`core.cutting.boundary_loops`, after merging duplicate vertices) become the
+those triangles (`core.mesh.boundary.boundary_loops`, after merging duplicate vertices) become the
 outline polygons -- outer ones counter-clockwise, holes ("A", "B", "8") clockwise -- scaled so
 that the cap height (the height of "H") is 1.0, baseline y = 0.  The curve, its object and a
 font datablock loaded for it are removed again: nothing stays in bpy.data (works headless, in

@@ -1,5 +1,5 @@
 """Analysis operators: `bolus.saliency_preview` (eqs. 4-1..4-4) and `bolus.segment`
-(eqs. 3-3..3-8, 4-5); contract in ../shared/SPEC.md."""
+(eqs. 3-3..3-8, 4-5); SPEC, docs/operators.md."""
 from __future__ import annotations
 
 import json
@@ -9,10 +9,8 @@ import bpy
 import numpy as np
 
 from ..blender import mesh_io
-from ..core.colormap import categorical_linear_rgba, outside_linear_rgba, scalar_to_linear_rgba
-from ..core.analysis.saliency import analyse, analysis_key
-from ..core.analysis.spectral import segment
-from ..blender.operator_base import (
+from ..blender.guide import poll_for
+from ..blender.objects import (
     ATTR_FLATTENABILITY,
     ATTR_PATCH,
     ATTR_PATCH_COLOR,
@@ -21,8 +19,8 @@ from ..blender.operator_base import (
     PROP_FLV,
     PROP_PATCH_TABLE,
     PROP_SUM_VARPI,
-    BolusOperator,
 )
+from ..blender.operator_base import BolusOperator
 from ..blender.properties import (
     color_by_property,
     eta_property,
@@ -31,13 +29,16 @@ from ..blender.properties import (
     seed_property,
     smoothing_property,
 )
+from ..core.analysis.saliency import analyse, analysis_key
+from ..core.analysis.spectral import segment
+from ..core.colormap import categorical_linear_rgba, outside_linear_rgba, scalar_to_linear_rgba
 
 
 #: The last preview's float64 (varpi, saliency), under `analysis_key` of its region and
 #: smoothing: `bolus.segment` on the same region and smoothing reuses them instead of
 #: recomputing (at 1.12M triangles 17-20 s of the segment's 69 s).  Kept in memory, not
 #: read back from the attributes: those are float32, and on a symmetric mesh the rounding
-#: can turn the cut (tests/test_core_spectral.py::test_segment_reuses_the_given_analysis).
+#: can turn the cut (tests/core/analysis/test_core_spectral.py::test_segment_reuses_the_given_analysis).
 #: The key hashes the region's exact coordinates and triangles, so any edit, another
 #: selection or another smoothing misses and segment recomputes.
 LAST_PREVIEW: dict = {}
@@ -74,7 +75,7 @@ class BOLUS_OT_saliency_preview(BolusOperator, bpy.types.Operator):
     smoothing_mm: smoothing_property()
     color_by: color_by_property()
 
-    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    # long: prepare / compute (modal: a worker thread) / finish, see blender/operator_base.py
     def prepare(self, context):
         region, topo, warnings = self.read_region(context, allow_nonmanifold=True)
         return SimpleNamespace(region=region, topo=topo, warnings=warnings, smoothing_mm=float(self.smoothing_mm))
@@ -126,8 +127,6 @@ class BOLUS_OT_segment(BolusOperator, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        from ..blender.guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
-
         return poll_for(cls, context)
 
     patches: patches_property()
@@ -136,7 +135,7 @@ class BOLUS_OT_segment(BolusOperator, bpy.types.Operator):
     smoothing_mm: smoothing_property()
     method: method_property()
 
-    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    # long: prepare / compute (modal: a worker thread) / finish, see blender/operator_base.py
     def prepare(self, context):
         region, topo, warnings = self.read_region(context, allow_nonmanifold=False)
         return SimpleNamespace(region=region, topo=topo, warnings=warnings, patches=int(self.patches),

@@ -1,6 +1,6 @@
-"""Operator `bolus.select_area` (SPEC; issue 11 point 0): the treatment area around the 3D cursor.
+"""Operator `bolus.select_area` (SPEC): the treatment area around the 3D cursor.
 
-Reads the whole active mesh (world mm), calls `core.treatment_area.treatment_area` with
+Reads the whole active mesh (world mm), calls `core.cuts.treatment_area.treatment_area` with
 the 3D cursor, writes the cut (the border's level line through the faces) with
 `mesh_cuts.apply_cuts`, selects the area's faces and leaves the user in Edit Mode (face
 select mode) with it selected.  Everything is computed before the mesh is touched, so a
@@ -13,14 +13,12 @@ from types import SimpleNamespace
 import bpy
 import numpy as np
 
-from ..blender import mesh_cuts, mesh_io
-from ..core.errors import BolusError
-from ..core.cuts.treatment_area import treatment_area
+from ..blender import mesh_cuts, mesh_io, mesh_region
+from ..blender.objects import ATTR_AREA_TMP
 from ..blender.operator_base import BolusOperator
 from ..blender.properties import area_radius_property, exclude_cavities_property
-
-#: a FACE INT attribute that carries the area through `apply_cuts`; removed afterwards
-_TMP_ATTR = "bolus_area_tmp"
+from ..core.cuts.treatment_area import treatment_area
+from ..core.errors import BolusError
 
 
 class BOLUS_OT_select_area(BolusOperator, bpy.types.Operator):
@@ -32,7 +30,7 @@ class BOLUS_OT_select_area(BolusOperator, bpy.types.Operator):
     radius_mm: area_radius_property()
     exclude_cavities: exclude_cavities_property()
 
-    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    # long: prepare / compute (modal: a worker thread) / finish, see blender/operator_base.py
     def prepare(self, context):
         obj = mesh_io.active_mesh_object(context)
         me = obj.data
@@ -41,7 +39,7 @@ class BOLUS_OT_select_area(BolusOperator, bpy.types.Operator):
                              "key: apply or remove them first")
         if len(me.polygons) == 0:
             raise BolusError(f"'{obj.name}' has no faces: the bolus tools need a surface mesh")
-        region = mesh_io.read_region(context, obj, polys=np.ones(len(me.polygons), dtype=bool))
+        region = mesh_region.read_region(context, obj, polys=np.ones(len(me.polygons), dtype=bool))
         cursor = np.array(context.scene.cursor.location, dtype=np.float64) * region.mm_per_unit
         return SimpleNamespace(obj=obj, region=region, cursor=cursor, radius_mm=float(self.radius_mm),
                                exclude_cavities=bool(self.exclude_cavities))
@@ -93,8 +91,8 @@ def _write_area(context, obj, region, area) -> None:
     me = obj.data
     tmp = me.copy()
     try:
-        sel = mesh_cuts.apply_cuts(tmp, region, area, _TMP_ATTR) > 0
-        tmp.attributes.remove(tmp.attributes[_TMP_ATTR])
+        sel = mesh_cuts.apply_cuts(tmp, region, area, ATTR_AREA_TMP) > 0
+        tmp.attributes.remove(tmp.attributes[ATTR_AREA_TMP])
         _select_faces(tmp, sel)
         context.tool_settings.mesh_select_mode = (False, False, True)  # vertex mode would select faces across holes
         bm = bmesh.from_edit_mesh(me)

@@ -2,7 +2,7 @@
 
 The only operator that changes the source mesh's topology, because that is its whole
 purpose: the jagged patch borders left by `segment` are replaced by smooth cut curves
-on the surface (core.cutlines), crossed polygons are re-triangulated, and
+on the surface (core.cuts.cutlines), crossed polygons are re-triangulated, and
 `bolus_patch`, the seams and the patch colours are updated.  Everything is computed
 before the mesh is touched; undo restores the mesh exactly.
 """
@@ -14,15 +14,14 @@ from types import SimpleNamespace
 import bpy
 import numpy as np
 
-from ..blender import mesh_cuts, mesh_io
+from ..blender import mesh_cuts, mesh_io, mesh_region
+from ..blender.guide import poll_for
+from ..blender.objects import ATTR_PATCH, ATTR_PATCH_COLOR, PROP_CUT_TABLE, PROP_PATCH_TABLE
+from ..blender.operator_base import BolusOperator, time_limit
+from ..core.budget import check_budget
 from ..core.colormap import categorical_linear_rgba
 from ..core.cuts.cutlines import cut_region_check, patch_table, smooth_cuts
-from ..core.budget import check_budget
 from ..core.errors import BolusError
-from ..blender.operator_base import ATTR_PATCH, ATTR_PATCH_COLOR, PROP_PATCH_TABLE, BolusOperator, time_limit
-
-#: ours: one row per border (method, turning before/after, shift), read by the panel
-PROP_CUT_TABLE = "bolus_cut_table"
 
 
 def format_cut_row(r: dict) -> str:
@@ -43,11 +42,9 @@ class BOLUS_OT_smooth_cuts(BolusOperator, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        from ..blender.guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
-
         return poll_for(cls, context)
 
-    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    # long: prepare / compute (modal: a worker thread) / finish, see blender/operator_base.py
     def prepare(self, context):
         obj, region, labels = _read_patches(context)
         checked, why = cut_region_check(region.V, region.F, labels, region.vert_ids)  # on the patch faces only
@@ -134,7 +131,7 @@ def _read_patches(context):
     if not (poly_labels >= 0).any():
         raise BolusError(f"no face of '{obj.name}' belongs to a patch: run Segment into Patches first")
     patch = poly_labels >= 0
-    region = mesh_io.read_region(context, obj, polys=patch | mesh_io.polygons_next_to(me, patch))
+    region = mesh_region.read_region(context, obj, polys=patch | mesh_io.polygons_next_to(me, patch))
     return obj, region, poly_labels[region.tri_poly]
 
 

@@ -18,20 +18,30 @@ import bpy
 import numpy as np
 
 from ..blender import mesh_io
-from ..core.colormap import outside_linear_rgba, srgb_to_linear
+from ..blender.guide import poll_for
+from ..blender.objects import (
+    ATTR_AIR_GAP,
+    ATTR_AIR_GAP_COLOR,
+    ATTR_PATCH,
+    IMPROVED_SUFFIX,
+    PROP_FLV_AFTER,
+    PROP_FLV_BEFORE,
+    PROP_IMPROVE_TABLE,
+    PROP_MAX_AIR_GAP,
+    PROP_MAX_GAP,
+    PROP_PREFIX,
+    PROP_SOURCE,
+    PROP_SUM_VARPI_AFTER,
+    PROP_SUM_VARPI_BEFORE,
+    is_improved_object,
+)
+from ..blender.operator_base import BolusOperator, time_limit
+from ..blender.properties import improve_method_property, max_gap_property, seed_property
+from ..core.analysis.saliency import DEFAULT_SMOOTHING_MM
 from ..core.budget import check_budget
+from ..core.colormap import outside_linear_rgba, srgb_to_linear
 from ..core.errors import BolusError
 from ..core.improve.improve import ImproveJob, improve_messages
-from ..core.analysis.saliency import DEFAULT_SMOOTHING_MM
-from ..blender.operator_base import ATTR_PATCH, BolusOperator, time_limit
-from .unfold import PATTERN_SUFFIX, is_pattern_object
-from ..blender.properties import improve_method_property, max_gap_property, seed_property
-
-ATTR_AIR_GAP = "bolus_air_gap"
-ATTR_AIR_GAP_COLOR = "bolus_air_gap_color"
-PROP_IMPROVE_TABLE = "bolus_improve_table"
-PROP_SOURCE = "bolus_source"
-IMPROVED_SUFFIX = "_improved"
 
 #: the air-gap colour scale (gap in mm, sRGB): 0 cool blue, 0.5 pale, 1 mm (the clinic's usual
 #: limit) warm orange, 2 mm and more red; linear in between
@@ -47,11 +57,6 @@ def air_gap_linear_rgba(gap_mm) -> np.ndarray:
     out = np.ones((len(g), 4), dtype=np.float32)
     out[:, :3] = srgb_to_linear(srgb)
     return out
-
-
-def is_improved_object(obj) -> bool:
-    """True for a ``<name>_improved`` object made by Improve Flattenability."""
-    return obj is not None and obj.type == "MESH" and PROP_IMPROVE_TABLE in obj
 
 
 def _world_winding(obj, F: np.ndarray) -> np.ndarray:
@@ -90,7 +95,7 @@ class _ImproveRun:
         self.patched = labels is not None
         sizes = np.bincount(np.zeros(len(self.region.F), np.int64) if labels is None else labels[labels >= 0])
         check_budget("improve_flattenability", sizes[sizes > 0], f"the region has {len(self.region.F):,} triangles",
-                     "select the treatment area first (Select Treatment Area)",  # issue 14 point 2
+                     "select the treatment area first (Select Treatment Area)",
                      limit=time_limit(context))
         self.job = ImproveJob(self.region.V, _world_winding(src, self.region.F), self.max_gap_mm, method=method,
                               rng=self.seed, smoothing_mm=self.smoothing_mm, patch_labels=labels,
@@ -110,7 +115,7 @@ def _link_improved(context, src, name: str, me) -> bpy.types.Object:
         if old is not None and old.users == 0:
             bpy.data.meshes.remove(old)
         for key in list(obj.keys()):  # the last run's figures
-            if key.startswith("bolus_"):
+            if key.startswith(PROP_PREFIX):
                 del obj[key]
     else:
         obj = bpy.data.objects.new(name, me)
@@ -186,12 +191,12 @@ def build_improved_object(context, run: _ImproveRun, res) -> bpy.types.Object:
     table = improve_table(run, res)
     wb, wa = res.whole_before, res.whole_after
     obj[PROP_SOURCE] = src.name
-    obj["bolus_max_gap_mm"] = run.max_gap_mm
-    obj["bolus_FLV_before"] = float(wb.flv)
-    obj["bolus_FLV_after"] = float(wa.flv)
-    obj["bolus_sum_varpi_before"] = float(wb.sum_varpi)
-    obj["bolus_sum_varpi_after"] = float(wa.sum_varpi)
-    obj["bolus_max_air_gap_mm"] = float(np.max(res.gap, initial=0.0))
+    obj[PROP_MAX_GAP] = run.max_gap_mm
+    obj[PROP_FLV_BEFORE] = float(wb.flv)
+    obj[PROP_FLV_AFTER] = float(wa.flv)
+    obj[PROP_SUM_VARPI_BEFORE] = float(wb.sum_varpi)
+    obj[PROP_SUM_VARPI_AFTER] = float(wa.sum_varpi)
+    obj[PROP_MAX_AIR_GAP] = float(np.max(res.gap, initial=0.0))
     obj[PROP_IMPROVE_TABLE] = json.dumps(table)
     return obj
 
@@ -221,8 +226,6 @@ class BOLUS_OT_improve_flattenability(BolusOperator, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):  # not on a pattern, nor on '<name>_improved' (would make '<name>_improved_improved')
-        from ..blender.guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
-
         return poll_for(cls, context)
 
     def _start(self, context) -> _ImproveRun:

@@ -1,11 +1,11 @@
 """Operator `bolus.export_pattern` (SPEC): the pattern object as a true-scale SVG, DXF or PDF.
 
-The pattern object is read like any region (`mesh_io.read_region`: world coordinates in
-mm, the one place that converts scene units), grouped by piece (`core.pattern_mesh.export_pieces`),
-its matching marks found from the source vertex of every pattern vertex
-(`core.pattern_marks.pattern_marks`: seams between pieces, darts and joins within one) and
-written by `core.pattern_export.write_pattern`, which picks the format from the file's
-extension and writes atomically (nothing half-written is ever left behind).
+The pattern object is read like any region (`mesh_region.read_region`: world coordinates in
+mm, converted from scene units by `mesh_io.world_mm`), grouped by piece
+(`core.pattern.pattern_mesh.export_pieces`), its matching marks found from the source vertex
+of every pattern vertex (`core.pattern.marks.pattern_marks`: seams between pieces, darts and
+joins within one) and written by `core.pattern.export.write_pattern`, which picks the format
+from the file's extension and writes atomically (nothing half-written is ever left behind).
 """
 from __future__ import annotations
 
@@ -15,14 +15,23 @@ import bpy
 import numpy as np
 from bpy.props import EnumProperty, StringProperty
 
-from ..blender import mesh_io
+from ..blender import mesh_io, mesh_region
+from ..blender.guide import poll_for
+from ..blender.objects import (
+    ATTR_PATCH,
+    ATTR_PIECE,
+    ATTR_SOURCE_VERTEX,
+    PATTERN_SUFFIX,
+    PROP_PATTERN_TABLE,
+    PROP_SOURCE,
+    pattern_of,
+)
+from ..blender.operator_base import BolusOperator
+from ..blender.properties import page_property, seam_allowance_property
 from ..core.errors import BolusError
 from ..core.pattern.export import write_pattern
 from ..core.pattern.marks import PatternMarks, pattern_marks
 from ..core.pattern.pattern_mesh import export_pieces
-from ..blender.operator_base import ATTR_PATCH, BolusOperator
-from .unfold import ATTR_PIECE, ATTR_SOURCE_FACE, ATTR_SOURCE_VERTEX, PATTERN_SUFFIX, PROP_PATTERN_TABLE
-from ..blender.properties import page_property, seam_allowance_property
 
 FORMATS = {"SVG": ".svg", "DXF": ".dxf", "PDF": ".pdf"}
 FORMAT_ITEMS = [
@@ -35,10 +44,8 @@ FORMAT_ITEMS = [
 def pattern_object_for(context) -> bpy.types.Object:
     """The active pattern object, or the pattern of the active source object."""
     obj = mesh_io.active_mesh_object(context)
-    if ATTR_SOURCE_FACE in obj.data.attributes:
-        return obj
-    pat = bpy.data.objects.get(obj.name + PATTERN_SUFFIX)
-    if pat is not None and pat.type == "MESH" and ATTR_SOURCE_FACE in pat.data.attributes:
+    pat = pattern_of(obj)
+    if pat is not None:
         return pat
     raise BolusError(f"'{obj.name}' has no pattern yet: run Unfold Patches first")
 
@@ -56,7 +63,7 @@ def pattern_pieces(context, pat: bpy.types.Object) -> tuple[list[dict], PatternM
     without pieces or source vertices is exported by patch, without matching marks)."""
     notes = []
     with mesh_io.object_mode(pat):
-        region = mesh_io.read_region(context, obj=pat, polys=np.ones(len(pat.data.polygons), dtype=bool))
+        region = mesh_region.read_region(context, obj=pat, polys=np.ones(len(pat.data.polygons), dtype=bool))
     poly_patch = mesh_io.read_face_labels(pat, ATTR_PATCH)
     if poly_patch is None:
         raise BolusError(f"'{pat.name}' has no '{ATTR_PATCH}' face attribute: run Unfold Patches again")
@@ -81,12 +88,12 @@ def pattern_pieces(context, pat: bpy.types.Object) -> tuple[list[dict], PatternM
 def default_pattern_path(active_name: str | None, blend_dir: str | None, ext: str = ".svg") -> str:
     """``<source>_pattern<ext>`` beside the .blend file (or relative when it is not saved),
     the source's name also when its pattern object is the active one."""
-    base = (active_name or "pattern").removesuffix(PATTERN_SUFFIX) + "_pattern" + ext
+    base = (active_name or "pattern").removesuffix(PATTERN_SUFFIX) + PATTERN_SUFFIX + ext
     return os.path.join(blend_dir, base) if blend_dir else base
 
 
 def default_svg_path(active_name: str | None, blend_dir: str | None) -> str:
-    """The default SVG path (kept for scripts written against the SVG-only export)."""
+    """`default_pattern_path` with the SVG extension (scripts call it by this name)."""
     return default_pattern_path(active_name, blend_dir, ".svg")
 
 
@@ -107,8 +114,6 @@ class BOLUS_OT_export_pattern(BolusOperator, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        from ..blender.guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
-
         return poll_for(cls, context)
     bl_options = {"REGISTER"}
 
@@ -137,7 +142,7 @@ class BOLUS_OT_export_pattern(BolusOperator, bpy.types.Operator):
         pat = pattern_object_for(context)
         pieces, marks, notes = pattern_pieces(context, pat)
         info = write_pattern(path, pieces, marks, page=self.page, label=self.label,
-                             title=f"{pat.get('bolus_source', pat.name)}: bolus pattern",
+                             title=f"{pat.get(PROP_SOURCE, pat.name)}: bolus pattern",
                              seam_allowance_mm=self.seam_allowance_mm)
         for note in notes:
             self.report({"INFO"}, note)

@@ -1,17 +1,17 @@
 """Operators for 3D printing: `print_segment`, `orient_parts`, `export_parts` (SPEC; seed ch. 6).
 
 They read the region, call the core and write back: `print_segment` the face attribute
-``bolus_print_part`` (core.print_segmentation, 6.2); `orient_parts` one object per part,
-``<name>_part_<i>``, its polygons in world coordinates, the rotation to its build
-direction and the plate layout in its transform (core.print_parts.orient_print_parts,
-core.layout.plate_layout), the figures as custom properties and a table on the source;
-`export_parts` one binary STL per part in mm, each at the origin on z = 0.
+``bolus_print_part`` (core.printing.segmentation, 6.2; on a bolus solid `blender.solid_split`);
+`orient_parts` one object per part, ``<name>_part_<i>``, its polygons in world coordinates,
+the rotation to its build direction and the plate layout in its transform
+(core.printing.parts.orient_print_parts, core.mesh.layout.plate_layout), the figures as custom
+properties and a table on the source; `export_parts` one binary STL per part in mm, each at
+the origin on z = 0 (a solid's parts checked closed, `blender.part_checks`).
 """
 from __future__ import annotations
 
 import json
 import os
-import re
 from contextlib import contextmanager
 from types import SimpleNamespace
 
@@ -20,16 +20,27 @@ import numpy as np
 from bpy.props import StringProperty
 from mathutils import Matrix
 
-from ..blender import mesh_io
+from ..blender import mesh_io, part_checks, solid_split
 from ..blender.compat import stl_export as _stl_export  # version differences live in compat
-from ..core.colormap import categorical_linear_rgba
-from ..core.budget import check_budget
-from ..core.errors import BolusError
-from ..core.mesh.layout import centre_on_plate, plate_layout
-from ..core.pattern.pattern_mesh import pattern_polygons
-from ..core.printing.measures import CRITICAL_ANGLE_DEG, open_surface_note, overhang_faces
-from ..core.printing.parts import PrintPlan, orient_print_parts, row_text
-from ..core.printing.segmentation import print_segmentation
+from ..blender.guide import poll_for
+from ..blender.objects import (
+    ATTR_OVERHANG_COLOR,
+    ATTR_PRINT_PART,
+    ATTR_PRINT_PART_COLOR,
+    PART_INFIX,
+    PROP_DIRECTION,
+    PROP_ORIENT_TABLE,
+    PROP_PART_INDEX,
+    PROP_PART_SOURCE,
+    PROP_PRINT_TABLE,
+    PROP_SUPPORT,
+    PROP_WQ,
+    PROP_WU,
+    is_bolus_object,
+    is_solid_part,
+    part_objects,
+    parts_source_name,
+)
 from ..blender.operator_base import BolusOperator, time_limit
 from ..blender.properties import (
     layer_property,
@@ -38,31 +49,18 @@ from ..blender.properties import (
     seed_property,
     skin_side_up_property,
 )
+from ..core.budget import check_budget
+from ..core.colormap import categorical_linear_rgba
+from ..core.errors import BolusError
+from ..core.mesh.layout import centre_on_plate, plate_layout
+from ..core.pattern.pattern_mesh import pattern_polygons
+from ..core.printing.measures import CRITICAL_ANGLE_DEG, open_surface_note, overhang_faces
+from ..core.printing.parts import PrintPlan, orient_print_parts, row_text
+from ..core.printing.segmentation import print_segmentation
 
-#: names fixed by SPEC.md
-ATTR_PRINT_PART = "bolus_print_part"
-PART_INFIX = "_part_"
-PROP_DIRECTION = "bolus_print_direction"
-PROP_WQ = "bolus_WQ"
-PROP_WU = "bolus_WU"
-PROP_SUPPORT = "bolus_support_volume_mm3"
-#: ours
-ATTR_PRINT_PART_COLOR = "bolus_print_part_color"
-ATTR_OVERHANG_COLOR = "bolus_overhang"
-PROP_PRINT_TABLE = "bolus_print_table"
-PROP_ORIENT_TABLE = "bolus_orient_table"
-PROP_PART_SOURCE = "bolus_source"
-PROP_PART_INDEX = "bolus_part"
 PART_GAP_MM = 10.0  #: between the parts' bounding boxes on the plate: room to pick each one
 OVERHANG_RGBA = (0.8, 0.05, 0.02, 1.0)
 PLAIN_RGBA = (0.6, 0.6, 0.6, 1.0)
-
-
-def part_objects(source_name: str) -> list[bpy.types.Object]:
-    """The ``<name>_part_<i>`` objects of a source, by part index."""
-    pat = re.compile(re.escape(source_name + PART_INFIX) + r"(\d+)$")
-    found = [(int(m.group(1)), ob) for ob in bpy.data.objects if (m := pat.match(ob.name))]
-    return [ob for _, ob in sorted(found, key=lambda t: t[0])]
 
 
 def _remove_parts(source_name: str) -> None:
@@ -83,25 +81,21 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
     method: print_method_property()
     seed: seed_property()
 
-    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    # long: prepare / compute (modal: a worker thread) / finish, see blender/operator_base.py
     def prepare(self, context):
-        from . import solid_print as solid_print_ops  # noqa: PLC0415 (it imports this module)
-
-        if solid_print_ops.is_bolus_object(context.active_object):  # a solid from make_shell: cut into solid parts
-            return solid_print_ops.prepare_solid(self, context)
+        if is_bolus_object(context.active_object):  # a solid from make_shell: cut into solid parts
+            return solid_split.prepare_solid(self, context)
         region, topo, warnings = self.read_region(context, allow_nonmanifold=True)
         check_budget("print_segment", [topo.m], f"the region has {topo.m:,} triangles",
                      "make the bolus on the treatment area first (Select Treatment Area, Make Bolus) and split "
-                     "that", limit=time_limit(context))  # refuse now, not after minutes (issue 14)
+                     "that", limit=time_limit(context))  # refuse now, not after minutes
         return SimpleNamespace(solid=False, region=region, topo=topo, warnings=warnings, parts=int(self.parts),
                                method=self.method.lower(), seed=int(self.seed))
 
     @staticmethod
     def compute(job, progress):
-        from . import solid_print as solid_print_ops  # noqa: PLC0415 (it imports this module)
-
         if job.solid:
-            return solid_print_ops.compute_solid(job, progress)
+            return solid_split.compute_solid(job, progress)
         region = job.region
         return print_segmentation(
             region.V, region.F, job.parts, method=job.method, rng=job.seed, topo=job.topo,
@@ -109,10 +103,8 @@ class BOLUS_OT_print_segment(BolusOperator, bpy.types.Operator):
         )
 
     def finish(self, context, job, seg):
-        from . import solid_print as solid_print_ops  # noqa: PLC0415 (it imports this module)
-
         if job.solid:
-            return solid_print_ops.finish_solid(self, context, job, seg)
+            return solid_split.finish_solid(self, context, job, seg)
         region, topo, warnings = job.region, job.topo, job.warnings
         obj, me = region.obj, region.mesh
         poly_labels = region.on_polygons(np.asarray(seg.labels, dtype=np.int64), -1)  # a polygon's triangles share a part
@@ -144,11 +136,9 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
     layer_mm: layer_property()
     skin_side_up: skin_side_up_property()
 
-    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    # long: prepare / compute (modal: a worker thread) / finish, see blender/operator_base.py
     def prepare(self, context):
-        from . import solid_print as solid_print_ops  # noqa: PLC0415 (it imports this module)
-
-        region, topo, warnings = solid_print_ops.read_parts_region(self, context)
+        region, topo, warnings = part_checks.read_parts_region(self, context)
         obj, me = region.obj, region.mesh
         if self.layer_mm <= 0:
             raise BolusError("the layer height must be positive")
@@ -163,7 +153,7 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
             raise BolusError("none of the region's faces belongs to a print part: run Split into Print Parts first")
         return SimpleNamespace(region=region, topo=topo, warnings=warnings, tri_labels=tri_labels,
                                layer_mm=float(self.layer_mm),
-                               options=solid_print_ops.orient_options(region, tri_labels, self.skin_side_up))
+                               options=part_checks.orient_options(region, tri_labels, self.skin_side_up))
 
     @staticmethod
     def compute(job, progress):
@@ -172,11 +162,9 @@ class BOLUS_OT_orient_parts(BolusOperator, bpy.types.Operator):
                                   progress=lambda f, t: progress(0.9 * f, t), **job.options)
 
     def finish(self, context, job, plan):
-        from . import solid_print as solid_print_ops  # noqa: PLC0415 (it imports this module)
-
         region, topo, warnings, tri_labels = job.region, job.topo, job.warnings, job.tri_labels
         obj = region.obj
-        closed_info, closed_warn = solid_print_ops.closed_lines(region, tri_labels)  # solids only
+        closed_info, closed_warn = part_checks.closed_lines(region, tri_labels)  # solids only
         self.progress(0.9, "part objects")
         self._make_part_objects(context, region, tri_labels, plan)
         table = plan.table(layer_mm=self.layer_mm, critical_angle_deg=CRITICAL_ANGLE_DEG,
@@ -256,8 +244,6 @@ class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        from ..blender.guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
-
         return poll_for(cls, context)
 
     directory: StringProperty(name="Folder", subtype="DIR_PATH", default="")
@@ -269,13 +255,8 @@ class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def run(self, context):
-        from . import improve as improve_ops, solid_print as solid_print_ops  # noqa: PLC0415 (they import this module)
-
         obj = mesh_io.active_mesh_object(context)
-        # the 'bolus_source' of a bolus or an improved surface names the skin it was made from: its parts
-        # are its own; a print part's names the object it is a part of
-        own = solid_print_ops.is_bolus_object(obj) or improve_ops.is_improved_object(obj)
-        source = obj.name if own else obj.get(PROP_PART_SOURCE, obj.name)
+        source = parts_source_name(obj)  # a bolus's or an improved surface's own parts, or a part's siblings
         parts = part_objects(source)
         if not parts:
             raise BolusError(f"'{source}' has no print parts yet: run Orient Print Parts first")
@@ -293,15 +274,15 @@ class BOLUS_OT_export_parts(BolusOperator, bpy.types.Operator):
         try:
             for k, part in enumerate(parts):
                 self.progress(k / len(parts))
-                path = os.path.join(folder, solid_print_ops.stl_file_name(part))
+                path = os.path.join(folder, part_checks.stl_file_name(part))
                 for o in context.view_layer.objects:
                     o.select_set(o is part)
                 context.view_layer.objects.active = part
                 with _at_origin(context, part):
                     _stl_export(path, scale)
                 written.append(path)
-                if solid_print_ops.is_solid_part(part):  # SPEC: closed when the part is a solid
-                    notes.append(solid_print_ops.export_note(context, part, os.path.basename(path)))
+                if is_solid_part(part):  # SPEC: closed when the part is a solid
+                    notes.append(part_checks.export_note(context, part, os.path.basename(path)))
         finally:
             for o in context.view_layer.objects:
                 o.select_set(o in was_selected)

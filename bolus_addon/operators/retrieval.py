@@ -8,7 +8,7 @@ dissimilarity, imports the best one as a new object and stores the ``count`` bes
 ``bolus_retrieval`` (JSON list of {"model", "score"}, best first).
 
 The main thread reads what needs Blender (the photo's pixels through ``bpy.data.images``, the
-meshes of .blend files); the describing and ranking run in the worker thread (operators.py).
+meshes of .blend files); the describing and ranking run in the worker thread (blender/modal_run.py).
 STL and OBJ models are taken as millimetres (planning systems write mm), so the imported match
 has its true size in the scene's unit.
 """
@@ -24,13 +24,10 @@ import numpy as np
 from bpy.props import IntProperty, StringProperty
 
 from ..blender import mesh_io
-from ..core.retrieval import library as retrieval
-from ..core.errors import BolusError
+from ..blender.objects import PROP_LIBRARY, PROP_MATCH_SOURCE, PROP_RETRIEVAL
 from ..blender.operator_base import BolusOperator
-
-PROP_RETRIEVAL = "bolus_retrieval"  # SPEC: scene custom property
-PROP_LIBRARY = "bolus_library"  # scene: {"directory", "models", "built", "seconds"} of the last build
-PROP_MATCH_SOURCE = "bolus_library_model"  # on the imported match: its file name and score
+from ..core.errors import BolusError
+from ..core.retrieval import library as retrieval
 
 AMBIGUOUS = 0.05  #: the second best within 5 % of the best's dissimilarity: warned as a tie
 PHOTO_MAX_PIXELS = 800 * 600  #: photos above this are scaled down first (seed 5.4: keep under 800 x 600)

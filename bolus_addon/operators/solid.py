@@ -1,18 +1,18 @@
-"""Operator `bolus.make_shell` (SPEC; issue 11 point 1, seed 1.1): the printable bolus solid.
+"""Operator `bolus.make_shell` (SPEC; seed 1.1): the printable bolus solid.
 
-From the region (Edit Mode selection, else the whole mesh) `core.shell.make_shell` builds one
-closed, manifold, outward-wound solid whose inner face lies on the skin (moved out by the
+From the region (Edit Mode selection, else the whole mesh) `core.solid.shell.make_shell` builds
+one closed, manifold, outward-wound solid whose inner face lies on the skin (moved out by the
 clearance) and whose outer face lies at the true distance ``thickness_mm`` from it; the rest
 of the skin is passed along so a bolus that would run into the face elsewhere is refused.
-With a label, `core.engrave.engrave_labels` engraves it and the L / R markers on the outer
-face (outlines from Blender's built-in font, `text_outlines`).
+With a label, `core.solid.engrave.engrave_labels` engraves it and the L / R markers on the
+outer face (outlines from Blender's built-in font, `blender.labels`).
 
 The result is a new object ``<name>_bolus`` (world units, identity transform, beside the
 source; an existing one is replaced, so the user can re-run with another thickness): face
 attribute ``bolus_shell_side`` (SIDE_* of core.solid), the figures as custom properties, and
-two mesh datablocks kept with a fake user for `print_segment`: the skin region and the plain
-(un-engraved) solid.  The source is never changed; Blender data is created only after every
-computation succeeded, and removed again if writing it fails.
+two mesh datablocks kept with a fake user for `print_segment` (`blender.solid_io`): the skin
+region and the plain (un-engraved) solid.  The source is never changed; Blender data is
+created only after every computation succeeded, and removed again if writing it fails.
 """
 from __future__ import annotations
 
@@ -23,106 +23,47 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..blender import mesh_io
-from ..core.errors import BolusError
-from ..core.solid.shell import check_shell_request, make_shell
-from ..core.solid.manifold import closed_report
+from ..blender import mesh_io, mesh_region
+from ..blender.guide import poll_for
+from ..blender.labels import engrave_with, label_outlines, left_vector
+from ..blender.objects import (
+    ATTR_SHELL_SIDE,
+    BOLUS_SUFFIX,
+    PROP_CLEARANCE,
+    PROP_DENSITY,
+    PROP_HOLES,
+    PROP_LABEL,
+    PROP_MASS,
+    PROP_PREFIX,
+    PROP_RESOLUTION,
+    PROP_SKIN_MESH,
+    PROP_SOLID_MESH,
+    PROP_SOURCE,
+    PROP_THICKNESS,
+    PROP_THICKNESS_MAX,
+    PROP_THICKNESS_MEAN,
+    PROP_THICKNESS_MIN,
+    PROP_VOLUME,
+    SKIN_SUFFIX,
+    SOLID_SUFFIX,
+    is_bolus_object,
+    part_objects,
+)
 from ..blender.operator_base import BolusOperator, time_limit
-from .printing import part_objects
 from ..blender.properties import clearance_property, label_property, resolution_property, thickness_property
+from ..blender.solid_io import remove_mesh, stored_meshes, tri_mesh
+from ..core.errors import BolusError
+from ..core.solid.manifold import closed_report
+from ..core.solid.shell import check_shell_request, make_shell
 
-#: names fixed by SPEC.md / the issue-11 contract (h11_api.md)
-BOLUS_SUFFIX = "_bolus"
-ATTR_SHELL_SIDE = "bolus_shell_side"
-PROP_THICKNESS = "bolus_thickness_mm"
-PROP_VOLUME = "bolus_volume_cm3"
-PROP_THICKNESS_MIN = "bolus_thickness_min_mm"
-PROP_THICKNESS_MAX = "bolus_thickness_max_mm"
-#: ours
-PROP_THICKNESS_MEAN = "bolus_thickness_mean_mm"
-PROP_MASS = "bolus_mass_g"
-PROP_DENSITY = "bolus_density_g_cm3"
-PROP_CLEARANCE = "bolus_clearance_mm"
-PROP_RESOLUTION = "bolus_resolution_mm"
-PROP_LABEL = "bolus_label"
-PROP_SOURCE = "bolus_source"
-PROP_SKIN_MESH = "bolus_skin_mesh"
-PROP_SOLID_MESH = "bolus_solid_mesh"
-PROP_HOLES = "bolus_holes"
-SKIN_SUFFIX = "_skin"
-SOLID_SUFFIX = "_solid"
-#: a wall thinner than this fraction of the one asked is reported (issue 11: min thickness >= 0.95 t)
+#: a wall thinner than this fraction of the one asked is reported (the minimum thickness must be >= 0.95 t)
 THIN_FRACTION = 0.95
 DEFAULT_DENSITY = 1.04
-#: the world axis to the patient's left for each `left_axis` setting (world = DICOM LPS by default)
-LEFT_VECTORS = {"+X": (1.0, 0.0, 0.0), "-X": (-1.0, 0.0, 0.0)}
-
-
-def is_bolus_object(obj) -> bool:
-    """True for a solid made by Make Bolus (it carries the face attribute ``bolus_shell_side``)."""
-    return obj is not None and obj.type == "MESH" and ATTR_SHELL_SIDE in obj.data.attributes
-
-
-def tri_mesh(name: str, co: np.ndarray, F: np.ndarray) -> bpy.types.Mesh:
-    """A mesh of triangles F (m,3) on vertex positions co (n,3) in world units."""
-    F = np.asarray(F, dtype=np.int64)
-    me = mesh_io.new_mesh(name, np.asarray(co, dtype=np.float64), F.reshape(-1), np.arange(0, 3 * len(F), 3))
-    if len(me.polygons) != len(F):
-        bpy.data.meshes.remove(me)
-        raise BolusError(f"internal error: Blender dropped {len(F) - len(me.polygons)} invalid triangles of '{name}'")
-    return me
-
-
-def read_tri_mesh(me: bpy.types.Mesh, mm: float) -> tuple[np.ndarray, np.ndarray]:
-    """(V (n,3) mm, F (m,3) int64) of a mesh of triangles stored in world units (no transform)."""
-    V = mesh_io.get_array(me.vertices, "co", len(me.vertices), np.float64, 3) * mm
-    me.calc_loop_triangles()
-    F = mesh_io.get_array(me.loop_triangles, "vertices", len(me.loop_triangles), np.int64, 3)
-    if len(F) != len(me.polygons):
-        raise BolusError(f"the stored mesh '{me.name}' is no longer made of triangles: run Make Bolus again")
-    return V, F
-
-
-def left_vector(context) -> np.ndarray:
-    """(3,) unit world vector to the patient's left (Scene.bolus.left_axis)."""
-    settings = getattr(context.scene, "bolus", None)
-    return np.array(LEFT_VECTORS[getattr(settings, "left_axis", "+X")], dtype=np.float64)
-
-
-def label_outlines(label: str, part_count: int | None = None) -> dict:
-    """The TextOutline of every string `engrave_labels` needs for ``label`` (Blender's font)."""
-    from ..blender import text_outlines  # noqa: PLC0415 (the font needs Blender; only when a label is asked)
-    from ..core.solid.engrave import strings_needed  # noqa: PLC0415
-
-    return {s: text_outlines.text_outline(s) for s in strings_needed(label, part_count)}
-
-
-def engrave(context, V, F, side, label: str, part_labels=None):
-    """`core.engrave.engrave_labels` with outlines from Blender's font -> (V, F, side, part labels, warnings)."""
-    parts = None if part_labels is None else int(np.max(part_labels)) + 1
-    return engrave_with(V, F, side, label_outlines(label, parts), label, left_vector(context), part_labels)
-
-
-def engrave_with(V, F, side, outlines: dict, label: str, left, part_labels=None):
-    """`engrave` with the outlines and the left vector read beforehand (bpy-free: a worker thread's)."""
-    from ..core.solid.engrave import engrave_labels  # noqa: PLC0415
-
-    return engrave_labels(V, F, side, outlines, label, left, part_labels=part_labels, return_labels=True)
-
-
-def remove_mesh(me) -> None:
-    if me is not None and me.name in bpy.data.meshes:
-        bpy.data.meshes.remove(me)
-
-
-def stored_meshes(obj) -> list:
-    """The skin and plain-solid datablocks a bolus object names (those that still exist)."""
-    return [m for m in (bpy.data.meshes.get(obj.get(k, "")) for k in (PROP_SKIN_MESH, PROP_SOLID_MESH))
-            if m is not None]
 
 
 def clear_bolus_props(obj) -> None:
-    for k in [k for k in obj.keys() if k.startswith("bolus_")]:
+    """Remove every custom property of ours from obj (a re-run writes them anew)."""
+    for k in [k for k in obj.keys() if k.startswith(PROP_PREFIX)]:
         del obj[k]
 
 
@@ -139,11 +80,9 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):  # not on a bolus (would make '<name>_bolus_bolus')
-        from ..blender.guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
-
         return poll_for(cls, context)
 
-    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    # long: prepare / compute (modal: a worker thread) / finish, see blender/operator_base.py
     def prepare(self, context):
         t0 = time.perf_counter()
         t, c, res = float(self.thickness_mm), float(self.clearance_mm), float(self.resolution_mm)
@@ -203,7 +142,7 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
         rest[region.poly_ids] = False
         if not rest.any():
             return None
-        other = mesh_io.read_region(context, region.obj, polys=rest)
+        other = mesh_region.read_region(context, region.obj, polys=rest)
         return other.V, _world_winding(other.obj, other.F)
 
     def _write(self, context, region, skin_F, shell, V, F, side, label, density, volume_cm3):

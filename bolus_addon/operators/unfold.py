@@ -1,13 +1,13 @@
-"""Operator `bolus.unfold` (SPEC; seed 3.5, 4.5); the export is in pattern_export_ops.py.
+"""Operator `bolus.unfold` (SPEC; seed 3.5, 4.5); the export is in operators/pattern.py.
 
 `unfold` never touches the source: it reads the region and its `bolus_patch` labels
 and builds a new object ``<name>_pattern`` in z = 0 at true size (1 mm of pattern =
 1 mm on the patient, in scene units), whose polygons are the source's polygons with
 their corner order, one island per patch.  From the sidebar it runs modally, the
-unfolding in a worker thread (operators.py), with a progress bar; Esc cancels and leaves
-nothing behind.  The numbers
-(islands, polygon corners, float32 positions, errors, the pattern table and the
-messages) come from `core.pattern_mesh`; this module converts, calls, writes, reports.
+unfolding in a worker thread (blender/modal_run.py), with a progress bar; Esc cancels and
+leaves nothing behind.  The numbers (islands, polygon corners, float32 positions, errors,
+the pattern table and the messages) come from `core.pattern.pattern_mesh`; this module
+converts, calls, writes, reports.
 """
 from __future__ import annotations
 
@@ -17,17 +17,35 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..blender import mesh_io
-from ..core.colormap import diverging_linear_rgba
-from ..core.budget import check_budget
-from ..core.errors import BolusError
-from ..core.unfold.mid_surface import (
-    check_sheet_thickness,
-    check_thickness,
-    mid_surface,
-    piece_bending,
-    principal_curvatures,
+from ..blender import mesh_io, mesh_region
+from ..blender.guide import poll_for
+from ..blender.objects import (
+    ATTR_AREA_COLOR,
+    ATTR_AREA_ERROR,
+    ATTR_PATCH,
+    ATTR_PIECE,
+    ATTR_SOURCE_FACE,
+    ATTR_SOURCE_VERTEX,
+    PATTERN_SUFFIX,
+    PROP_EA,
+    PROP_EL,
+    PROP_MAX_EL,
+    PROP_PATTERN_TABLE,
+    PROP_SHEET_THICKNESS,
+    PROP_SOURCE,
 )
+from ..blender.operator_base import BolusOperator, time_limit
+from ..blender.properties import (
+    gap_property,
+    max_el_property,
+    refine_property,
+    sheet_thickness_property,
+    unfold_method_property,
+)
+from ..core.analysis.saliency import DEFAULT_SMOOTHING_MM
+from ..core.budget import check_budget
+from ..core.colormap import diverging_linear_rgba
+from ..core.errors import BolusError
 from ..core.pattern.pattern_mesh import (
     add_sheet_figures,
     build_pattern,
@@ -37,25 +55,16 @@ from ..core.pattern.pattern_mesh import (
     pattern_messages,
     sheet_messages,
 )
-from ..core.unfold.piece_advice import DEFAULT_WARN_FRACTION
-from ..core.analysis.saliency import DEFAULT_SMOOTHING_MM
-from ..core.unfold.sheet_pieces import iter_sheet_pieces
-from ..blender.operator_base import ATTR_PATCH, BolusOperator, time_limit
-from ..blender.properties import (
-    gap_property,
-    max_el_property,
-    refine_property,
-    sheet_thickness_property,
-    unfold_method_property,
+from ..core.unfold.mid_surface import (
+    check_sheet_thickness,
+    check_thickness,
+    mid_surface,
+    piece_bending,
+    principal_curvatures,
 )
+from ..core.unfold.piece_advice import DEFAULT_WARN_FRACTION
+from ..core.unfold.sheet_pieces import iter_sheet_pieces
 
-ATTR_SOURCE_FACE = "bolus_source_face"
-ATTR_PIECE = "bolus_piece"
-ATTR_SOURCE_VERTEX = "bolus_source_vertex"
-ATTR_AREA_COLOR = "bolus_area_distortion"
-ATTR_AREA_ERROR = "bolus_area_error"
-PROP_PATTERN_TABLE = "bolus_pattern_table"
-PATTERN_SUFFIX = "_pattern"
 #: |A / A0 - 1| shown at full colour strength in the pattern's area-distortion colours
 AREA_COLOR_RANGE = 0.1
 
@@ -69,7 +78,7 @@ def check_max_el(max_el_pct: float) -> float:
 
 def check_unfold_budget(triangles: int, islands, limit: float | None = None) -> None:
     """BolusError (figures and what to do) when unfolding islands (m,) (-1: left out) would take
-    longer than the time budget (core.budget, issue 14 point 2; limit: the user's time limit)."""
+    longer than the time budget (core.budget; limit: the user's time limit)."""
     sizes = np.bincount(islands[islands >= 0])
     check_budget("unfold", sizes, f"the region has {triangles:,} triangles in {len(sizes)} islands (the "
                  "connected pieces of its patches)", "select the treatment area first (Select Treatment Area) and "
@@ -88,7 +97,7 @@ class _UnfoldJob:
         self.progress = progress
         self.max_el = check_max_el(max_el_pct)
         self.thickness = check_thickness(thickness_mm)
-        self.region = region = mesh_io.read_region(context)
+        self.region = region = mesh_region.read_region(context)
         self.warnings = list(region.warnings)
         self.infos: list[str] = []
         poly_labels = mesh_io.read_face_labels(region.obj, ATTR_PATCH)  # safe in Edit Mode
@@ -154,12 +163,6 @@ class _UnfoldJob:
         return True
 
 
-def is_pattern_object(obj) -> bool:
-    """True for a ``<name>_pattern`` object made by Unfold."""
-    return (obj is not None and obj.type == "MESH"
-            and (PROP_PATTERN_TABLE in obj or ATTR_SOURCE_FACE in obj.data.attributes))
-
-
 def _link_object(context, src: bpy.types.Object, name: str, me: bpy.types.Mesh) -> bpy.types.Object:
     """The object ``name`` given the mesh ``me`` (its old mesh freed), or a new one beside ``src``."""
     obj = bpy.data.objects.get(name)
@@ -206,11 +209,11 @@ def build_pattern_object(context, job: _UnfoldJob) -> bpy.types.Object:
     mesh_io.write_face_colors(me, ATTR_AREA_COLOR, diverging_linear_rgba(b.area_error, AREA_COLOR_RANGE))
     obj = _link_object(context, src, name, me)
     el, ea, flipped = b.errors[None]
-    obj["bolus_EL"] = el
-    obj["bolus_EA"] = ea
-    obj["bolus_source"] = src.name
-    obj["bolus_sheet_thickness_mm"] = job.thickness
-    obj["bolus_max_el"] = job.max_el
+    obj[PROP_EL] = el
+    obj[PROP_EA] = ea
+    obj[PROP_SOURCE] = src.name
+    obj[PROP_SHEET_THICKNESS] = job.thickness
+    obj[PROP_MAX_EL] = job.max_el
     obj[PROP_PATTERN_TABLE] = json.dumps({
         "EL": el, "EA": ea, "flipped": flipped, "warn_pct": job.warn_pct, "max_el": job.max_el,
         "sheet_thickness_mm": job.thickness, "pieces": len(b.rows), "darts": len(lay.darts),
@@ -233,11 +236,9 @@ class BOLUS_OT_unfold(BolusOperator, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):  # not on a pattern (would make '<name>_pattern_pattern')
-        from ..blender.guide import poll_for  # noqa: PLC0415 (what each step needs: shared with the panel)
-
         return poll_for(cls, context)
 
-    # long: prepare / compute (modal: a worker thread) / finish, see operators.py
+    # long: prepare / compute (modal: a worker thread) / finish, see blender/operator_base.py
     def prepare(self, context):
         return _UnfoldJob(context, self.method, self.refine, self.gap_mm, self.max_el, self.sheet_thickness_mm,
                           progress=self.progress)

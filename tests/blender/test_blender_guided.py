@@ -1,4 +1,4 @@
-"""The guided panel (issue 14 point 4): steps in order, greyed with the reason, the next step
+"""The guided panel: steps in order, greyed with the reason, the next step
 marked; every operator's poll gives a reason for missing input; F3 finds every operator (the
 Bolus menu) with a label and a description of what it does, needs and makes.
 
@@ -95,7 +95,7 @@ def test_f3_finds_every_operator_in_the_bolus_menu(bpy_addon, scene):
     """F3 (menu search) only finds operators that are in a menu: Object > Bolus and, in Edit
     Mode, Mesh > Bolus list every bolus operator, in the order of the steps."""
     bpy = bpy_addon
-    from bolus_addon.panel import OP_SETTINGS
+    from bolus_addon.blender.panel_layout import OP_SETTINGS
 
     VIEW3D_MT_bolus = bpy.types.VIEW3D_MT_bolus  # the registered class (the extension's copy of the module)
     for parent in VIEW3D_MT_bolus.parents:
@@ -316,7 +316,7 @@ def test_panel_walks_a_whole_case(bpy_addon, scene):
 def test_long_reasons_wrap_to_the_sidebar(bpy_addon, scene):
     """Labels do not wrap in Blender: a reason longer than a line is drawn on several."""
     bpy = bpy_addon
-    from bolus_addon.panel import wrapped_label
+    from bolus_addon.blender.panel_layout import wrapped_label
 
     log = []
     text = "'skin' has no pattern yet: run Unfold Patches first, or select a pattern object"

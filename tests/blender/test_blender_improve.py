@@ -1,4 +1,4 @@
-"""`bolus.improve_flattenability` (SPEC; issue 13 point 4): the `<name>_improved` object.
+"""`bolus.improve_flattenability` (SPEC): the `<name>_improved` object.
 
 The operator's numbers are the core's (`core.improve.improve_flattenability` on the same
 world-mm region): these tests check what the Blender layer adds -- the copy and its transform,
@@ -137,9 +137,9 @@ def test_improved_copy_is_the_cores_surface(bpy_addon, raw, capfd, scale_length,
     assert info[-1].startswith("made 'skin_improved': the air gap (mm) in the point attribute 'bolus_air_gap'"), out
 
 
-def test_air_gap_colour_scale():
+def test_air_gap_colour_scale(bpy_addon):
     """0 mm cool, 1 mm warm, 2 mm and more red."""
-    from bolus_addon.operators.improve import air_gap_linear_rgba
+    from bolus.bolus_addon.operators.improve import air_gap_linear_rgba  # the registered module
 
     c = air_gap_linear_rgba(np.array([0.0, 1.0, 2.0, 5.0]))
     assert c.shape == (4, 4) and c.dtype == np.float32 and np.all(c[:, 3] == 1.0)
@@ -417,7 +417,7 @@ def test_esc_keeps_the_best_so_far(bpy_addon, raw):
 
 # =========================================================================== the next steps
 def test_unfold_shell_and_export_take_the_improved_object(bpy_addon, raw, tmp_path):
-    """The improved surface is where the sheet or printed bolus is made (issue 13 "Also")."""
+    """The improved surface is where the sheet or printed bolus is made."""
     bpy = bpy_addon
     V, F = bumpy(n=8)
     ob = make_object(bpy, V, F, scale_length=0.001)
@@ -443,7 +443,7 @@ def test_print_parts_of_the_improved_object_are_its_own(bpy_addon, raw, tmp_path
     """Its `bolus_source` names the skin it came from, as a print part's names its source: Export
     Parts and the panel's print tables with the improved object active are its own, not the skin's."""
     bpy = bpy_addon
-    from bolus.bolus_addon.panel import print_source
+    from bolus.bolus_addon.blender.objects import print_source
 
     ob = make_object(bpy, *bumpy(n=8), scale_length=0.001)
     assert bpy.ops.bolus.improve_flattenability(max_gap_mm=GAP) == {"FINISHED"}

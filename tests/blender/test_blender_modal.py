@@ -1,10 +1,10 @@
-"""Threaded modal runs (issue 14 point 4): every long operator runs modally with a progress bar,
+"""Threaded modal runs: every long operator runs modally with a progress bar,
 and Esc keeps the mesh as it was.
 
 Headless Blender has no window and no event loop, so the modal path is driven by hand: a
 fake context (the real one, with a window, a window manager that records the progress bar and
 the timer, a header and a status bar) and fake events ('TIMER', 'ESC', ...).  The shared
-machinery (operators.BolusOperator: prepare / compute / finish, `Worker`) is tested on a small
+machinery (blender/operator_base.BolusOperator: prepare / compute / finish; blender/modal_run `Worker`) is tested on a small
 dummy operator; every converted operator is run through the threaded path on one object and
 through ``bpy.ops`` (execute, the main thread) on an identical object, with the same result,
 ``compute`` seen to call no bpy and no Blender-layer code, and a cancelled run leaving the
@@ -27,7 +27,7 @@ from test_blender_shell import hemisphere
 
 pytestmark = pytest.mark.blender
 
-#: the operators that run compute() in a worker thread from the sidebar (issue 14 point 4)
+#: the operators that run compute() in a worker thread from the sidebar
 THREADED = ("saliency_preview", "segment", "smooth_cuts", "select_area", "unfold", "make_shell", "print_segment",
             "orient_parts", "build_library", "retrieve")
 #: the one that keeps its own step job (one job step per timer tick; Esc keeps the best so far)
@@ -154,13 +154,13 @@ def tick_until_done(op, ctx, limit_s=600.0):
 def test_threaded_run_progress_and_finish(bpy_addon):
     """invoke: prepare, a worker thread, a 0.1 s timer, the progress bar; ticks copy the worker's
     progress to the bar and the header; at the end finish runs in the main thread, all cleared."""
-    from bolus.bolus_addon.blender import operator_base as operators  # noqa: PLC0415
+    from bolus.bolus_addon.blender import modal_run  # noqa: PLC0415
 
     Dummy = dummy_class(bpy_addon)
     ctx, op = Ctx(bpy_addon), Dummy()
     wm = ctx.window_manager
     assert op.invoke(ctx, event("LEFTMOUSE")) == {"RUNNING_MODAL"}
-    assert wm.periods == [operators.MODAL_PERIOD_S] and wm.handlers == [op] and wm.bar == 1
+    assert wm.periods == [modal_run.MODAL_PERIOD_S] and wm.handlers == [op] and wm.bar == 1
     worker, job = op._worker, op._job
     assert op.modal(ctx, event("TIMER")) == {"RUNNING_MODAL"}  # nothing done yet
     assert wm.updates == [0]
@@ -348,13 +348,14 @@ class CallWatch:
     def not_bpy_free(self, module_file: str) -> list:
         """The calls a bpy-free compute must not make: any Blender-layer function of the add-on
         other than compute and its lambdas, the Worker's progress, and the two bpy-free helpers."""
-        base, solid_print, solid, unfold = ("blender/operator_base.py", "operators/solid_print.py",
-                                            "operators/solid.py", "operators/unfold.py")
-        allowed = {(base, "progress"), (base, "_main"), (module_file, "compute"),
-                   (module_file, "<lambda>"), (solid_print, "compute_solid"),
-                   (solid_print, "<lambda>"), (solid, "engrave_with"),
-                   (solid_print, "_part_arrays"), (solid_print, "<genexpr>"),
-                   (solid_print, "<listcomp>"), (unfold, "start"), (unfold, "step"),
+        worker, solid_split, labels, part_checks, unfold = (
+            "blender/modal_run.py", "blender/solid_split.py", "blender/labels.py", "blender/part_checks.py",
+            "operators/unfold.py")
+        allowed = {(worker, "progress"), (worker, "_main"), (module_file, "compute"),
+                   (module_file, "<lambda>"), (solid_split, "compute_solid"),
+                   (solid_split, "<lambda>"), (labels, "engrave_with"),
+                   (part_checks, "part_arrays"), (solid_split, "<genexpr>"),
+                   (solid_split, "<listcomp>"), (unfold, "start"), (unfold, "step"),
                    (unfold, "_reference"), (unfold, "compute_pattern"),
                    (unfold, "<listcomp>"), (unfold, "<genexpr>"), (unfold, "<lambda>"),
                    (unfold, "check_unfold_budget")}
@@ -386,7 +387,7 @@ def test_call_watch_sees_bpy_and_the_blender_layer(bpy_addon, scene):
     finally:
         threading.setprofile(None)
     t.join()
-    bad = watch.not_bpy_free("analysis_ops.py")
+    bad = watch.not_bpy_free("operators/analysis.py")
     assert ("mesh_io.py", "mm_per_unit") in {(p.rsplit("/", 1)[-1], fn) for p, fn in watch.calls}, bad
     assert any("method get of bpy_prop_collection" in b for b in watch.bpy_calls), bad
     assert len(bad) >= 2

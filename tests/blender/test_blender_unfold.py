@@ -379,7 +379,7 @@ def test_sixty_degree_cap_has_no_flipped_triangles(bpy_addon, scene):
     assert segments_cross(loops[0]["P"]) == 0, "the outline crosses itself"
     assert loops[0]["area"] > 0
     np.testing.assert_allclose(loops[0]["area"], m["A"].sum(), rtol=1e-6)
-    # a sphere cannot lie flat: some error, a few percent (issue 10: today's EL 3.56 %, EA 2.62 %, +-15 %)
+    # a sphere cannot lie flat: some error, a few percent (measured EL 3.56 %, EA 2.62 %; +-15 % allowed)
     assert m["EL"] == pytest.approx(0.0356, rel=0.15) and m["EA"] == pytest.approx(0.0262, rel=0.15), (m["EL"], m["EA"])
     assert json.loads(pat["bolus_pattern_table"])["flipped"] == 0
 
@@ -625,7 +625,7 @@ def test_unit_scale_is_honoured(bpy_addon, scene, tmp_path):
     # the subdivided icosahedron's cap is 0.6 % larger than the smooth one (its rim is not a circle)
     assert ref["source_area"] == pytest.approx(31606.24, rel=1e-6) and ref["source_area"] > cap_area
     # each half: half the rim (pi * 100 sin 60 = 272 mm) plus a meridian cut (209 mm), zigzagging along
-    # edges: 567.4 and 568.8 mm today (+-5 %); EL 1.09 %, EA 1.20 % (+-15 %)
+    # edges: 567.4 and 568.8 mm measured (+-5 %); EL 1.09 %, EA 1.20 % (+-15 %)
     assert ref["perimeter"] == pytest.approx([567.4, 568.8], rel=0.05), ref["perimeter"]
     assert ref["EL"] == pytest.approx(0.0109, rel=0.15) and ref["EA"] == pytest.approx(0.0120, rel=0.15), ref
     for case, r in results.items():
@@ -768,8 +768,8 @@ def test_unfold_inconsistent_winding(bpy_addon, scene):
 
 def test_export_default_file_is_named_for_the_source(bpy_addon):
     """The file browser's default: 'skin_pattern.svg' also when the pattern object 'skin_pattern' is
-    active and the .blend is not saved (it offered 'skin_pattern_pattern.svg')."""
-    from bolus_addon.operators.pattern import default_svg_path
+    active and the .blend is not saved (not 'skin_pattern_pattern.svg')."""
+    from bolus.bolus_addon.operators.pattern import default_svg_path  # the registered module
 
     assert default_svg_path("skin_pattern", None) == "skin_pattern.svg"
     assert default_svg_path("skin", None) == "skin_pattern.svg"
@@ -804,8 +804,8 @@ def cap_in_one_patch(bpy, half_angle_deg):
 
 
 def test_badly_shrunk_cap_is_warned_with_its_figures_and_the_dome_advice(bpy_addon, scene, capfd):
-    """Issue 9 item 4: a 120 degree cap of 10 mm radius in one patch unfolds with EL > 10 %;
-    it used to get no warning (only "started from a conformal map")."""
+    """A 120 degree cap of 10 mm radius in one patch unfolds with EL > 10 %: a warning with its
+    figures and the dome advice ("started from a conformal map" is a note, not the warning)."""
     bpy = bpy_addon
     src = cap_in_one_patch(bpy, 120.0)
     capfd.readouterr()
@@ -832,7 +832,7 @@ def test_badly_shrunk_cap_is_warned_with_its_figures_and_the_dome_advice(bpy_add
     assert bpy.ops.bolus.segment(patches=4) == {"FINISHED"}
     assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
     worst = max(r["EL"] for r in json.loads(pattern_of(bpy, src)["bolus_pattern_table"])["islands"])
-    # today: one piece EL 16.0 %, EA 10.2 %, area 0.91 of the skin; the worst of 4 pieces EL 3.2 % (+-15 %)
+    # measured: one piece EL 16.0 %, EA 10.2 %, area 0.91 of the skin; the worst of 4 pieces EL 3.2 % (+-15 %)
     assert worst == pytest.approx(0.0319, rel=0.15), (worst, m["EL"])
     assert m["EL"] == pytest.approx(0.160, rel=0.15) and m["EA"] == pytest.approx(0.102, rel=0.15)
     assert ratio == pytest.approx(0.910, rel=0.15)
@@ -847,7 +847,7 @@ def test_thirty_degree_cap_is_not_warned(bpy_addon, scene, capfd):
     assert warning_lines(out) == [], out
     row = json.loads(pattern_of(bpy, src)["bolus_pattern_table"])["islands"][0]
     assert not row["warn"] and row["EL"] < 0.03 and row["EA"] < 0.03
-    # today's figures: EL 0.99 %, EA 0.70 % (+-15 %)
+    # measured: EL 0.99 %, EA 0.70 % (+-15 %)
     assert row["EL"] == pytest.approx(0.0099, rel=0.15) and row["EA"] == pytest.approx(0.0070, rel=0.15)
 
 
@@ -903,7 +903,7 @@ def test_nostril_pocket_gets_the_cavity_advice(bpy_addon, scene, capfd):
 
 # =========================================================================== 11. smaller ones
 def test_unfold_with_the_pattern_active_is_refused(bpy_addon, scene):
-    """Issue 9 item 7: it used to make '<name>_pattern_pattern'."""
+    """Unfold on a pattern is refused (it would make '<name>_pattern_pattern'); on its source it runs."""
     bpy = bpy_addon
     src = make_object(bpy, *cylinder_piece(na=6, nl=4), name="skin", scale_length=0.001)
     assert bpy.ops.bolus.unfold(max_el=0.0) == {"FINISHED"}
@@ -918,7 +918,8 @@ def test_unfold_with_the_pattern_active_is_refused(bpy_addon, scene):
 
 
 def test_faces_outside_the_patches_are_an_info_said_once(bpy_addon, scene, capfd):
-    """Issue 9 item 7: unfolding a mesh segmented in a region warned "N faces in no patch were left out"."""
+    """Unfolding a mesh segmented in a region says once, as INFO, that the faces outside the patches were
+    left out (not a warning)."""
     bpy = bpy_addon
     V, F = cylinder_piece(na=6, nl=4)
     src = make_object(bpy, V, F, name="skin", scale_length=0.001)
