@@ -307,7 +307,7 @@ def test_error_in_edit_mode_stays_in_edit_mode(bpy_addon, scene):
     assert "bolus_patch" not in names1 and "bolus_flattenability" in ours1
 
 
-# ------------------------------------------- every operator that reads a region (issue 9)
+# ------------------------------------------- every operator that reads a region
 REGION_OPS = {"saliency_preview": {"smoothing_mm": 0.0}, "segment": {"patches": 2}, "smooth_cuts": {}, "unfold": {},
               "print_segment": {"parts": 2}, "orient_parts": {}, "improve_flattenability": {}}
 
@@ -328,7 +328,7 @@ def two_patches(ob) -> None:
 @pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
 @pytest.mark.parametrize("op", list(REGION_OPS))
 def test_non_finite_coordinates_are_refused(bpy_addon, scene, op, value):
-    """Issue 9 item 9: NaN coordinates were accepted by saliency_preview."""
+    """NaN or infinite coordinates are refused by every operator that reads a region."""
     bpy = bpy_addon
     V, F = grid(8, 8, h=10.0)
     ob = make_object(bpy, V, F, scale_length=0.001)
@@ -371,7 +371,7 @@ def test_non_finite_vertex_outside_the_edit_mode_region_is_ignored(bpy_addon, sc
 
 @pytest.mark.parametrize("op", list(REGION_OPS))
 def test_mm_mesh_in_a_metre_scene_warns(bpy_addon, scene, capfd, op):
-    """Issue 9 item 6: a 200 mm region imported from a mm file into a 1 m scene (it is 283 m across)."""
+    """A 200 mm region imported from a mm file into a 1 m scene (it is 283 m across) is warned about."""
     bpy = bpy_addon
     ob = make_object(bpy, *grid(8, 8, h=25.0))  # scale_length 1.0: 1 unit = 1 m
     two_patches(ob)

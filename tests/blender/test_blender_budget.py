@@ -1,4 +1,4 @@
-"""The time budget (issue 14 point 2: every operator finishes or refuses within a minute).
+"""The time budget: every operator finishes or refuses within a minute.
 
 `core.budget` estimates a step's time from the triangle counts; an operator whose estimate is
 over the budget refuses BEFORE the long work, with the figures and what to do.  The budget is

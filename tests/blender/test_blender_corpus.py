@@ -1,4 +1,4 @@
-"""Issue 14 point 1: the bad-mesh corpus (tests/badmesh.py) through every operator.
+"""The bad-mesh corpus (tests/badmesh.py) through every operator.
 
 Each case goes through the operators in the order a user runs them (`CHAIN`), each as from
 the UI (``EXEC_DEFAULT`` with an undo step).  Every step either FINISHES with valid output
@@ -579,7 +579,7 @@ LEARNED_EXPECT = {
 
 @pytest.mark.parametrize("name", list(CASES))
 def test_learned_split_on_corpus_case(bpy_addon, scene, tmp_path, name, capfd):
-    """The learned print split (issue 15) on every bad mesh: valid parts, or a refusal naming the problem;
+    """The learned print split on every bad mesh: valid parts, or a refusal naming the problem;
     the source changed only where the split writes, undone in one step, the user's mode kept."""
     bpy = bpy_addon
     case = CASES[name](bpy)

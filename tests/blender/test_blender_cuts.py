@@ -574,7 +574,7 @@ def test_panel_shows_the_cut_table(bpy_addon, scene):
     assert f"{row['turning_before']:.2f}→{row['turning_after']:.2f}" in labels
 
 
-# ------------------------------------------------- selection, region, reports (issue 9)
+# ------------------------------------------------- selection, region, reports
 def bumpy_region_grid(bpy, n=40):
     """A 100 mm grid with a bump; returns (object, mask of the quads within 30 mm of the centre)."""
     V, F = quad_grid(n)
@@ -624,7 +624,7 @@ def edit_flags(me):
 
 
 def test_selection_follows_the_region_in_edit_mode(bpy_addon, scene):
-    """Issue 9 item 2: the Edit Mode region, segmented and cut, is still exactly the selection."""
+    """The Edit Mode region, segmented and cut, is still exactly the selection."""
     bpy = bpy_addon
     ob, region = bumpy_region_grid(bpy)
     me = ob.data
@@ -732,7 +732,7 @@ def far_defect(kind: str):
 @pytest.mark.parametrize("kind, refusal", [("bowtie", "non-manifold"), ("fin", "non-manifold"),
                                            ("nan", "invalid coordinate")])
 def test_checks_apply_to_the_patch_faces_only(bpy_addon, scene, kind, refusal):
-    """Issue 9 item 3: a non-manifold (or NaN) spot 200 mm from the patches does not block the cut ..."""
+    """A non-manifold (or NaN) spot 200 mm from the patches does not block the cut ..."""
     bpy = bpy_addon
     V, F = quad_grid(12)
     W, G = far_defect(kind)
@@ -776,7 +776,7 @@ def test_second_run_reports_nothing_to_change(bpy_addon, scene, capfd):
 
 
 def test_each_border_reported_once(bpy_addon, scene, capfd):
-    """Issue 9 item 7: a border left as it is was printed twice (WARNING and INFO)."""
+    """Every border is reported once, also one left as it is (a WARNING only, not also an INFO line)."""
     bpy = bpy_addon
 
     def rule(x, y):

@@ -1,5 +1,5 @@
-"""`bpy.ops.bolus.smooth_cuts` twice (issue 9, item 7): "a second `smooth_cuts` re-cuts 2 of 5
-borders and adds 60 vertices (it must be idempotent)".
+"""`bpy.ops.bolus.smooth_cuts` twice: it is idempotent (a second run must not re-cut borders
+or add vertices).
 
 SPEC: with nothing to change (the borders already smooth) smooth_cuts changes nothing and
 raises no error.  Here the second call must leave the mesh exactly as the first one left

@@ -1,4 +1,4 @@
-"""`print_segment(method='LEARNED')` in Blender (issue 15; seed 6.4): on a skin region in Object
+"""`print_segment(method='LEARNED')` in Blender (seed 6.4): on a skin region in Object
 and Edit Mode, twice in a row, undone, and on a `<name>_bolus` solid cut into closed parts.
 
 Expectations are computed here from Blender's mesh data (connectivity with scipy, closedness and

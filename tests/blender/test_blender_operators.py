@@ -554,7 +554,7 @@ def test_undo_after_segment_restores_mesh(bpy_addon, scene):
     assert "bolus_patch" in ob.data.attributes and "bolus_patch_table" in ob
 
 
-# ------------------------------------------- every operator, every mode, both entries (issue 9)
+# ------------------------------------------- every operator, every mode, both entries
 def bump_grid(bpy, n=16, size=100.0):
     """A (n x n)-quad grid of `size` mm with a bump, 1 unit = 1 mm; returns (object, quad centres)."""
     V, F = bump_quads(n, size)
@@ -577,7 +577,7 @@ def edit_face_labels(me, name) -> np.ndarray:
 
 
 def test_unfold_after_segment_in_edit_mode(bpy_addon, scene):
-    """Issue 9 item 1, the repro: grid -> Edit Mode -> select all -> segment(3) -> unfold (was a TypeError)."""
+    """Grid -> Edit Mode -> select all -> segment(3) -> unfold: the pattern is made, Edit Mode and the selection kept."""
     bpy = bpy_addon
     ob, _ = bump_grid(bpy, n=30)
     bpy.ops.object.mode_set(mode="EDIT")
@@ -689,7 +689,7 @@ class _WM:
 
 @pytest.mark.parametrize("fail", ["TypeError", "BolusError"])
 def test_invoke_and_modal_are_guarded(bpy_addon, fail):
-    """Issue 9 item 1: invoke (the panel) caught only BolusError: a raw traceback reached the user."""
+    """invoke (the panel) and modal report any error, a BolusError or not: no raw traceback reaches the user."""
     from types import SimpleNamespace
 
     from bolus.bolus_addon.core.errors import BolusError  # noqa: PLC0415

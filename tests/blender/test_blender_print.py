@@ -412,7 +412,7 @@ def test_export_parts_stl(bpy_addon, scene, tmp_path):
         size_world = Wp.max(axis=0) - Wp.min(axis=0)
         assert np.allclose(hi - lo, size_world * scale, rtol=1e-3), (hi - lo, size_world)
         assert (hi - lo).max() > 50.0  # mm: a face part is centimetres, not millimetres, across
-        # each STL at the origin: XY bounding box centred on it, resting on z = 0 (issue 9 item 7)
+        # each STL at the origin: XY bounding box centred on it, resting on z = 0
         assert np.abs((lo + hi)[:2] / 2).max() < 1e-3, (lo, hi)
         assert abs(lo[2]) < 1e-3
         # the very same triangles, in mm, only moved

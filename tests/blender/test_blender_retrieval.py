@@ -1,4 +1,4 @@
-"""`build_library` and `retrieve` in Blender (issue 16; seed ch. 5): the cache is built, reused, redone
+"""`build_library` and `retrieve` in Blender (seed ch. 5): the cache is built, reused, redone
 for changed files and for a new cache version; a photo (a Workbench rendering) is described, the best
 match imported at true size and the best ones listed; bad photos and libraries are refused cleanly."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 14 point 3 in the Blender layer: `bolus.segment` reuses the last
+"""In the Blender layer, `bolus.segment` reuses the last
 `bolus.saliency_preview` of exactly the same region and smoothing (in memory, float64,
 keyed by `saliency.analysis_key`) and recomputes otherwise; the patches are the same
 either way."""

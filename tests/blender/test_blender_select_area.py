@@ -1,4 +1,4 @@
-"""bpy.ops.bolus.select_area (SPEC; issue 11 point 0): the treatment area around the 3D cursor."""
+"""bpy.ops.bolus.select_area (SPEC): the treatment area around the 3D cursor."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Blender-side tests of the sheet pattern of issue 12: `bpy.ops.bolus.unfold(max_el, sheet_thickness_mm)`
+"""Blender-side tests of the sheet pattern: `bpy.ops.bolus.unfold(max_el, sheet_thickness_mm)`
 with darts and splits, the mid-surface and the sheet-or-print advice, and
 `bpy.ops.bolus.export_pattern(filepath, page, label)` to SVG, DXF and PDF.
 

@@ -1,4 +1,4 @@
-"""Blender-side tests of `bpy.ops.bolus.make_shell` (SPEC; issue 11 point 1).
+"""Blender-side tests of `bpy.ops.bolus.make_shell` (SPEC).
 
 The add-on is driven as a user drives it: build a skin mesh, call the operator, then inspect
 ``<name>_bolus`` (its mesh, face attribute ``bolus_shell_side``, custom properties) and the

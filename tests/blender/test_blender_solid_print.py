@@ -1,5 +1,5 @@
 """Blender-side tests of `print_segment`, `orient_parts` and `export_parts` on a bolus solid
-(``<name>_bolus`` from `make_shell`; issue 11 points 2-3).
+(``<name>_bolus`` from `make_shell`).
 
 Every expectation (closedness, volumes, the joints' planes, STL contents) is computed here
 with numpy from Blender's mesh data and the written files, never with the add-on's core.
@@ -296,7 +296,7 @@ def test_orient_parts_takes_slivers_of_a_solid(bpy_addon, scene, capfd):
     assert "Warning" not in out or "zero-area" not in out, out
     # a part is not closed here (the box is cut along a face seam, not by a solid split): said per part
     assert "slab_bolus_part_0 is not closed" in out, out
-    # the same mesh as a skin surface (no bolus_shell_side) is refused as before
+    # the same mesh as a skin surface (no bolus_shell_side) gets the zero-area refusal of a surface
     me.attributes.remove(me.attributes["bolus_shell_side"])
     with pytest.raises(RuntimeError, match="zero-area triangle"):
         bpy.ops.bolus.orient_parts()

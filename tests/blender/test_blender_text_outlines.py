@@ -1,4 +1,4 @@
-"""Text outlines from Blender's built-in font (bolus_addon/text_outlines.py; issue 11 point 1)."""
+"""Text outlines from Blender's built-in font (bolus_addon/blender/text_outlines.py)."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Fuzzing every operator with hypothesis (issue 14 point 2).
+"""Fuzzing every operator with hypothesis.
 
 Random triangulated surfaces (tests/fuzzgen.py: noisy grids, spherical caps, open tubes, random
 Delaunay patches, random cuts and holes, 0.1 mm .. 1 m through the scene unit, random rotations in
