@@ -47,6 +47,15 @@ from ..errors import BolusError
 from ..rng import as_rng
 from .saliency import SaliencyResult, analyse, corner_angle_sums, flattenability, flattenability_value
 from ..mesh.topology import MeshTopology, submesh  # submesh: re-exported (it lived here)
+from .spectral_multilevel import (  # noqa: F401 (re-exported)
+    AGGREGATE_SIZE,
+    STRONG_WEIGHT,
+    LOBPCG_TOL,
+    LOBPCG_MAXITER,
+    aggregate_vertices,
+    multilevel_eigenvectors,
+)
+from .patch_table import PatchStats, patch_stats, patch_stats_on  # noqa: F401 (re-exported)
 
 __all__ = [
     "HIGH_SALIENCY",
@@ -174,88 +183,6 @@ def smallest_eigenvectors(L: sp.spmatrix, k: int, rng=None, coords: np.ndarray |
     return vals, vecs * signs
 
 
-#: aggregates of about this many vertices, each connected through edges of weight >=
-#: STRONG_WEIGHT (eq. 3-4; weaker: longer than ~2.1 sigma in the distance of eq. 4-5,
-#: most salient edges), so that an aggregate does not straddle a salient cut
-AGGREGATE_SIZE, STRONG_WEIGHT = 20.0, 0.1
-#: LOBPCG refinement: residual |L u - lambda u| <= LOBPCG_TOL * mean degree, at most
-#: LOBPCG_MAXITER iterations (1M: 18 iterations gave the exact clusters on 99.78 % of
-#: the vertices, 43 on 99.994 %, principal-angle cosines 1.0 / 0.99999996)
-LOBPCG_TOL, LOBPCG_MAXITER = 1e-6, 50
-
-
-def aggregate_vertices(L: sp.spmatrix, coords: np.ndarray, size: float = AGGREGATE_SIZE,
-                       strong: float = STRONG_WEIGHT) -> tuple[int, np.ndarray]:
-    """Connected aggregates of a graph's vertices for `multilevel_eigenvectors`.
-
-    L (n,n) graph Laplacian (weights -L_ij), coords (n,3): vertices fall into cubes of
-    side mean edge length * sqrt(size); an aggregate is a connected component of the
-    edges of weight >= ``strong`` inside one cube (so every aggregate is connected, and
-    two sheets that pass through one cube stay apart).  Returns (count, aggregate (n,))."""
-    n = L.shape[0]
-    T = sp.triu(L, 1).tocoo()
-    i, j, w = T.row, T.col, -T.data
-    h = float(np.linalg.norm(coords[i] - coords[j], axis=1).mean()) * np.sqrt(size) if len(i) else 1.0
-    c = np.floor((coords - coords.min(axis=0)) / (h or 1.0)).astype(np.int64)
-    dims = c.max(axis=0) + 1
-    _, cell = np.unique((c[:, 0] * dims[1] + c[:, 1]) * dims[2] + c[:, 2], return_inverse=True)
-    cell = cell.reshape(-1)
-    keep = (cell[i] == cell[j]) & (w >= strong)
-    G = sp.coo_matrix((np.ones(int(keep.sum())), (i[keep], j[keep])), shape=(n, n))
-    return connected_components(G, directed=False)
-
-
-def multilevel_eigenvectors(L: sp.spmatrix, k: int, coords: np.ndarray, rng=None
-                            ) -> tuple[np.ndarray, np.ndarray]:
-    """The k smallest eigenpairs of a connected graph Laplacian L (n,n), coarse to fine.
-
-    1. `aggregate_vertices`: P (n,nc) the 0/1 map vertex -> aggregate;
-    2. coarse problem P^T L P x = lambda P^T P x (the Galerkin projection of eq. 3-8),
-       by shift-invert Lanczos on the nc (~n/16) aggregates;
-    3. its eigenvectors prolonged (P x) start LOBPCG on L (the constant vector, eigenvalue
-       0 of a connected graph, is held as a constraint and returned first), preconditioned
-       by 0.5 D^-1 + P (P^T L P - sigma P^T P)^-1 P^T (Jacobi + the coarse solve: with
-       Jacobi alone 40 iterations left the vertex clusters 91 % equal, with it 99.98 %).
-    Returns (values (k,), vectors (n,k)) ascending (signs not fixed).  rng: start vector
-    of the coarse Lanczos (deterministic results)."""
-    rng = as_rng(rng)
-    L = sp.csr_matrix(L)
-    n = L.shape[0]
-    ones = np.full((n, 1), 1.0 / np.sqrt(n))
-    if k == 1:
-        return np.zeros(1), ones
-    nc, agg = aggregate_vertices(L, np.asarray(coords, dtype=np.float64))
-    P = sp.csr_matrix((np.ones(n), (np.arange(n), agg)), shape=(n, nc))
-    Lc = (P.T @ L @ P).tocsc()
-    Mc = sp.diags(np.bincount(agg, minlength=nc).astype(np.float64)).tocsc()
-    scale = float(np.abs(L.diagonal()).mean()) or 1.0
-    sigma = -1e-6 * scale
-    lu = splu((Lc - sigma * Mc).tocsc())
-    kc = min(k, nc - 1)
-    if kc < k or nc <= max(300, 4 * k):
-        vc, Uc = eigh(Lc.toarray(), Mc.toarray())
-    else:
-        OPinv = LinearOperator((nc, nc), matvec=lu.solve, dtype=np.float64)
-        vc, Uc = eigsh(Lc, k=k, M=Mc, sigma=sigma, which="LM", OPinv=OPinv, v0=rng.standard_normal(nc), tol=1e-10)
-    order = np.argsort(vc)[:k]
-    X0 = P @ Uc[:, order[1:]]
-    if X0.shape[1] < k - 1:  # fewer aggregates than eigenvectors: random fill
-        X0 = np.c_[X0, rng.standard_normal((n, k - 1 - X0.shape[1]))]
-    dinv = 1.0 / L.diagonal()
-
-    def precondition(R):
-        R2 = R.reshape(n, -1)
-        out = 0.5 * dinv[:, None] * R2 + P @ lu.solve(np.ascontiguousarray(P.T @ R2))
-        return out.reshape(R.shape)
-
-    M = LinearOperator((n, n), matvec=precondition, matmat=precondition, dtype=np.float64)
-    with warnings.catch_warnings():  # "not reaching the requested tolerance": capped by design
-        warnings.simplefilter("ignore", UserWarning)
-        vals, U = lobpcg(L, X0, M=M, Y=ones, tol=LOBPCG_TOL * scale, maxiter=LOBPCG_MAXITER, largest=False)
-    order = np.argsort(vals)
-    return np.r_[0.0, vals[order]], np.c_[ones, U[:, order]]
-
-
 def vote_groups(labels: np.ndarray, face_groups: np.ndarray, areas: np.ndarray | None = None) -> np.ndarray:
     """One label per group: triangles with the same group id (the triangles of one
     polygon), labels (m,) int >= 0, face_groups (m,) int, areas (m,) optional (default 1)
@@ -347,81 +274,6 @@ def connected_patches(topo: MeshTopology, labels: np.ndarray, min_area: float = 
     new = np.empty(comp.max() + 1, dtype=np.int64)
     new[uniq[order]] = np.arange(len(uniq))
     return new[comp]
-
-
-@dataclass
-class PatchStats:
-    """One row of the seed's Table 4-1."""
-
-    patch: int
-    vertices: int
-    edges: int
-    faces: int
-    area_mm2: float
-    sum_varpi: float
-    flv: float
-
-    def as_dict(self) -> dict:
-        return dict(self.__dict__)
-
-
-def patch_stats(V_analysis: np.ndarray, F: np.ndarray, labels: np.ndarray,
-                V_true: np.ndarray | None = None) -> list[PatchStats]:
-    """Vertices, edges, faces, area, sum varpi and FLV of every patch (Table 4-1).
-
-    Each patch is measured as a mesh of its own (its border vertices are boundary
-    vertices, varpi = 0 there), with the angle sums taken on ``V_analysis`` (the
-    smoothed copy, or the raw vertices).  Areas come from ``V_true`` (default
-    V_analysis), in mm^2.
-    """
-    V_true = V_analysis if V_true is None else V_true
-    rows = []
-    for p in range(int(labels.max()) + 1 if labels.size else 0):
-        Fl, ids = submesh(F, labels == p)
-        topo = MeshTopology(V_true[ids], Fl)
-        theta = corner_angle_sums(V_analysis[ids], topo)
-        varpi = flattenability(topo, theta)
-        s = float(varpi.sum())
-        rows.append(
-            PatchStats(p, len(ids), len(topo.edges), len(Fl), float(topo.areas.sum()), s, flattenability_value(s))
-        )
-    return rows
-
-
-def patch_stats_on(topo: MeshTopology, labels: np.ndarray, varpi: np.ndarray) -> list[PatchStats]:
-    """`patch_stats` from the whole region's flattenability, without a mesh per patch.
-
-    topo: the region (no non-manifold vertex: refused with BolusError), labels (m,)
-    0..p-1, varpi (n,) the region's flattenability (eq. 4-1, `analyse(...).varpi`).
-    Same rows as `patch_stats(V_analysis, F, labels, V)`: a vertex is interior to its
-    patch exactly when it is interior to the region and all its triangles are in the
-    patch (none of its edges is a patch border), and there its angle sum is the region's
-    (the same triangles); the other vertices of a patch count 0.  At 1M triangles this
-    avoids three sub-meshes and their fan analysis (~9 s)."""
-    if topo.nonmanifold_vertices.any():
-        raise BolusError("patch_stats_on needs a region without non-manifold vertices")
-    labels = np.asarray(labels, dtype=np.int64)
-    p = int(labels.max()) + 1 if labels.size else 0
-    F = topo.F
-    fe = topo.face_edges
-    lab3 = np.repeat(labels, 3)
-    # a border edge has triangles of two patches; its vertices are not interior to a patch
-    e_lo = np.full(len(topo.edges), p, dtype=np.int64)
-    e_hi = np.full(len(topo.edges), -1, dtype=np.int64)
-    np.minimum.at(e_lo, fe.ravel(), lab3)
-    np.maximum.at(e_hi, fe.ravel(), lab3)
-    on_border = np.zeros(topo.n, dtype=bool)
-    on_border[topo.edges[e_lo != e_hi].ravel()] = True
-    vlab = np.empty(topo.n, dtype=np.int64)
-    vlab[F.ravel()] = lab3
-    inner = topo.interior_vertices & ~on_border
-    sums = np.bincount(vlab[inner], weights=np.asarray(varpi, dtype=np.float64)[inner], minlength=p)
-    nverts = np.bincount(np.unique(F.ravel() * p + lab3) % p, minlength=p)
-    nedges = np.bincount(np.unique(fe.ravel() * p + lab3) % p, minlength=p)
-    nfaces = np.bincount(labels, minlength=p)
-    area = np.bincount(labels, weights=topo.areas, minlength=p)
-    return [PatchStats(q, int(nverts[q]), int(nedges[q]), int(nfaces[q]), float(area[q]), float(sums[q]),
-                       flattenability_value(float(sums[q]))) for q in range(p)]
 
 
 @dataclass

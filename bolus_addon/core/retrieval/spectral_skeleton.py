@@ -72,6 +72,29 @@ from ..errors import BolusError
 from ..rng import as_rng
 from ..analysis.spectral import gaussian_weights, graph_laplacian, smallest_eigenvectors
 from ..mesh.topology import MeshTopology
+from .skeleton_graphs import (  # noqa: F401 (re-exported)
+    NEIGHBOUR_SHARE,
+    MIN_NEIGHBOURS,
+    FEATURE_DIMENSIONS,
+    CONTOUR_SAMPLES,
+    _finite_points,
+    _symmetric,
+    link_components,
+    _weights_from_lengths,
+    contour_samples,
+    contour_graph,
+    mesh_graph,
+)
+from .skeleton_icp import (  # noqa: F401 (re-exported)
+    SAMPLES,
+    Skeleton,
+    resample,
+    skeleton_samples,
+    start_rotations,
+    _kabsch,
+    icp,
+    dissimilarity,
+)
 
 __all__ = [
     "FEATURE_DIMENSIONS",
@@ -97,162 +120,17 @@ __all__ = [
     "dissimilarity",
 ]
 
-FEATURE_DIMENSIONS = 3  #: k of 5.2.1: eigenvectors after the constant one
 DEFAULT_CLUSTERS = 6  #: GMM clusters of `skeleton` (module doc)
 AUTO_CLUSTERS = (3, 4, 5, 6, 7, 8)  #: clusters='auto': the count of lowest BIC among these
-NEIGHBOUR_SHARE, MIN_NEIGHBOURS = 0.10, 10  #: contour graph: each point joined to 10 % of the points (>= 10)
-CONTOUR_SAMPLES = 1500  #: contour graphs are built on at most this many points (`contour_samples`)
 GMM_ROWS = 4000  #: the mixture is fitted on at most this many rows (drawn evenly), then labels all
 GMM_RESTARTS = 2  #: mixture restarts (best likelihood)
 BRANCH_SHARE = 0.10  #: a piece of a cluster's outer half is a branch when it holds >= 10 % of that half
 END_MIN_RADIUS = 0.25  #: an end lies at >= 25 % of the largest distance from v0
 MERGE_RADIUS = 0.02  #: skeleton points closer than 2 % of the RMS radius along the tree are one point
-SAMPLES = 64  #: points per resampled skeleton
 DENSE_MAX = 300  #: dense eigensolver up to this many vertices
 
 
-@dataclass
-class Skeleton:
-    """A feature skeleton (5.2.2) of s points in a d-dimensional feature space (d = 3)."""
-
-    points: np.ndarray  #: (s,d) feature-space coordinates (rows of the embedding)
-    edges: np.ndarray  #: (e,2) int64 pairs of point indices (a tree: e = s - 1)
-    centre: int  #: index of the centre vertex v0's point
-    kinds: tuple  #: (s,) 'centre', 'branch', 'rendezvous' or 'end'
-    vertices: np.ndarray  #: (s,) int64 graph vertex (mesh vertex or contour pixel) of each point
-    labels: np.ndarray  #: (n,) int64 set (GMM cluster, or part of a divided one) of every graph vertex
-
-    @property
-    def ends(self) -> np.ndarray:
-        """Indices of the 'end' points."""
-        return np.array([i for i, k in enumerate(self.kinds) if k == "end"], dtype=np.int64)
-
-    @property
-    def length(self) -> float:
-        """Total length of the segments in the feature space."""
-        if len(self.edges) == 0:
-            return 0.0
-        return float(np.linalg.norm(self.points[self.edges[:, 0]] - self.points[self.edges[:, 1]], axis=1).sum())
-
-
 # ---------------------------------------------------------------------------------------------- graphs
-
-
-def _finite_points(P, d: int, what: str) -> np.ndarray:
-    P = np.asarray(P, dtype=np.float64)
-    if P.ndim != 2 or P.shape[1] != d:
-        raise BolusError(f"{what} must be an (n, {d}) array, got shape {P.shape}")
-    if not np.isfinite(P).all():
-        raise BolusError(f"{what} contain NaN or infinite coordinates")
-    return P
-
-
-def _symmetric(rows, cols, d, n) -> sp.csr_matrix:
-    """Symmetric csr (n,n) of distances d on the pairs (rows, cols), duplicates and self pairs removed."""
-    rows, cols, d = np.asarray(rows), np.asarray(cols), np.asarray(d, dtype=np.float64)
-    keep = rows != cols
-    lo, hi = np.minimum(rows[keep], cols[keep]), np.maximum(rows[keep], cols[keep])
-    key, first = np.unique(lo.astype(np.int64) * n + hi, return_index=True)
-    lo, hi, d = key // n, key % n, d[keep][first]
-    return sp.coo_matrix((np.r_[d, d], (np.r_[lo, hi], np.r_[hi, lo])), shape=(n, n)).tocsr()
-
-
-def link_components(points, D: sp.spmatrix) -> sp.csr_matrix:
-    """A connected graph: D (n,n) symmetric sparse edge lengths on points (n,d), plus, while it is in pieces,
-    for every piece the shortest pair (i in it, j outside it) (Boruvka's rule: each round at least halves the
-    number of pieces).  Returns (n,n) csr of lengths; D itself when already connected.  Stored zeros (equal
-    points) count as edges."""
-    P = np.asarray(points, dtype=np.float64)
-    n = len(P)
-    D = sp.csr_matrix(D)
-    pattern = sp.csr_matrix((np.ones(D.nnz), D.indices, D.indptr), shape=D.shape)
-    ncomp, lab = connected_components(pattern, directed=False)
-    if ncomp <= 1:
-        return D
-    tree = cKDTree(P)
-    kq = min(n, 16)
-    dist, idx = tree.query(P, k=kq)
-    dist, idx = dist.reshape(n, kq), idx.reshape(n, kq)
-    add_r, add_c, add_d = [], [], []
-    while ncomp > 1:
-        other = lab[idx] != lab[:, None]
-        dd = np.where(other, dist, np.inf)
-        j = np.argmin(dd, axis=1)
-        best_d = dd[np.arange(n), j]
-        best_j = idx[np.arange(n), j]
-        pairs = []
-        for c in range(ncomp):
-            members = np.flatnonzero(lab == c)
-            i = members[np.argmin(best_d[members])]
-            if np.isfinite(best_d[i]):
-                pairs.append((i, best_j[i], best_d[i]))
-            else:  # no other piece among the 16 nearest of any member: search the rest directly
-                rest = np.flatnonzero(lab != c)
-                dq, jq = cKDTree(P[rest]).query(P[members])
-                a = int(np.argmin(dq))
-                pairs.append((members[a], rest[jq[a]], dq[a]))
-        for i, jj, d in pairs:
-            add_r.append(i)
-            add_c.append(jj)
-            add_d.append(d)
-        A = pattern + _symmetric(np.array(add_r), np.array(add_c), np.ones(len(add_r)), n)
-        ncomp, lab = connected_components(A, directed=False)
-    C = D.tocoo()
-    E = _symmetric(np.r_[C.row, add_r], np.r_[C.col, add_c], np.r_[C.data, add_d], n)
-    return E
-
-
-def _weights_from_lengths(D: sp.csr_matrix) -> sp.csr_matrix:
-    """Gaussian weights (eqs. 5-8, 5-10) of a symmetric length matrix, sigma the mean over its edges."""
-    U = sp.triu(D, 1).tocoo()
-    w = gaussian_weights(U.data)
-    n = D.shape[0]
-    return sp.coo_matrix((np.r_[w, w], (np.r_[U.row, U.col], np.r_[U.col, U.row])), shape=(n, n)).tocsr()
-
-
-def contour_samples(points2d, count: int = CONTOUR_SAMPLES) -> np.ndarray:
-    """Indices (min(P, count),) of contour points spread evenly over points2d (P,2): farthest-point sampling
-    from the point nearest the centroid (deterministic; every point when P <= count)."""
-    P = _finite_points(points2d, 2, "contour points")
-    n, count = len(P), int(count)
-    if n <= count:
-        return np.arange(n)
-    chosen = np.empty(count, np.int64)
-    chosen[0] = int(np.argmin(((P - P.mean(axis=0)) ** 2).sum(axis=1)))
-    d2 = ((P - P[chosen[0]]) ** 2).sum(axis=1)
-    for i in range(1, count):
-        chosen[i] = int(np.argmax(d2))
-        np.minimum(d2, ((P - P[chosen[i]]) ** 2).sum(axis=1), out=d2)
-    return np.sort(chosen)
-
-
-def contour_graph(points2d, neighbours: int | None = None) -> sp.csr_matrix:
-    """Edge lengths (P,P) csr of the symmetrised kNN graph of contour pixels points2d (P,2) (eq. 5-9 distances;
-    each pixel joined to its ``neighbours`` nearest, by default ``NEIGHBOUR_SHARE`` of the points and at least
-    ``MIN_NEIGHBOURS``; pieces linked by `link_components`)."""
-    P = _finite_points(points2d, 2, "contour points")
-    n = len(P)
-    if n < FEATURE_DIMENSIONS + 2:
-        raise BolusError(f"the contour has {n} points, too few for a feature space (at least "
-                         f"{FEATURE_DIMENSIONS + 2})")
-    k = max(MIN_NEIGHBOURS, int(round(NEIGHBOUR_SHARE * n))) if neighbours is None else int(neighbours)
-    if k < 1:
-        raise BolusError(f"neighbours must be at least 1, got {neighbours}")
-    k = min(k + 1, n)
-    dist, idx = cKDTree(P).query(P, k=k)
-    rows = np.repeat(np.arange(n), k)
-    return link_components(P, _symmetric(rows, idx.ravel(), dist.ravel(), n))
-
-
-def mesh_graph(V, F) -> sp.csr_matrix:
-    """Edge lengths (n,n) csr of a triangle mesh's one-ring graph (eq. 5-11 on the edges of V (n,3), F (m,3));
-    pieces linked by `link_components`."""
-    topo = MeshTopology(V, F)  # shapes, finiteness and indices checked here
-    if topo.n < FEATURE_DIMENSIONS + 2:
-        raise BolusError(f"the model has {topo.n} vertices, too few for a feature space (at least "
-                         f"{FEATURE_DIMENSIONS + 2})")
-    E = topo.edges
-    return link_components(topo.V, _symmetric(E[:, 0], E[:, 1], topo.edge_lengths, topo.n))
 
 
 # ---------------------------------------------------------------------------------------------- embeddings
@@ -581,115 +459,3 @@ def image_skeleton(points2d, clusters=DEFAULT_CLUSTERS, k: int = FEATURE_DIMENSI
 # ---------------------------------------------------------------------------------------------- comparison
 
 
-def resample(skel: Skeleton, count: int = SAMPLES) -> np.ndarray:
-    """(count,d) points evenly spaced by length along the skeleton's segments (at the middles of count equal
-    steps); a skeleton without length gives count copies of its centre."""
-    count = int(count)
-    if count < 1:
-        raise BolusError(f"resample needs at least 1 point, got {count}")
-    P = np.asarray(skel.points, dtype=np.float64)
-    if len(skel.edges) == 0:
-        return np.repeat(P[[skel.centre]], count, axis=0)
-    a, b = P[skel.edges[:, 0]], P[skel.edges[:, 1]]
-    seg = np.linalg.norm(b - a, axis=1)
-    total = float(seg.sum())
-    if total <= 0:
-        return np.repeat(P[[skel.centre]], count, axis=0)
-    cum = np.r_[0.0, np.cumsum(seg)]
-    t = (np.arange(count) + 0.5) * total / count
-    e = np.clip(np.searchsorted(cum, t, side="right") - 1, 0, len(seg) - 1)
-    frac = np.where(seg[e] > 0, (t - cum[e]) / np.where(seg[e] > 0, seg[e], 1.0), 0.0)
-    return a[e] + frac[:, None] * (b[e] - a[e])
-
-
-def skeleton_samples(skel: Skeleton, count: int = SAMPLES) -> np.ndarray:
-    """`resample`d points (count,d), centred at the centre point v0 and scaled to unit RMS radius about it."""
-    S = resample(skel, count) - np.asarray(skel.points, dtype=np.float64)[skel.centre]
-    rms = float(np.sqrt((S**2).sum(axis=1).mean()))
-    return S / rms if rms > 0 else S
-
-
-def start_rotations(count: int = 48, rng=0) -> np.ndarray:
-    """(count,3,3) starting orientations for `icp`: the identity first, then the 24 rotations of the cube each
-    followed by its mirror image (-R), then random rotations from ``rng`` (module doc)."""
-    count = int(count)
-    if count < 1:
-        raise BolusError(f"icp needs at least 1 starting orientation, got {count}")
-    rots = []
-    for perm in itertools.permutations(range(3)):
-        for signs in itertools.product((1.0, -1.0), repeat=3):
-            M = np.zeros((3, 3))
-            M[np.arange(3), perm] = signs
-            if np.linalg.det(M) > 0:
-                rots.append(M)
-    rots.sort(key=lambda M: (-np.trace(M), tuple(M.ravel())))  # identity first
-    mats = [m for R in rots for m in (R, -R)]
-    g = as_rng(rng)
-    while len(mats) < count:
-        q, rr = np.linalg.qr(g.standard_normal((3, 3)))
-        q = q * np.sign(np.diag(rr))
-        mats.append(q if np.linalg.det(q) > 0 else -q)
-    return np.array(mats[:count])
-
-
-def _kabsch(Y: np.ndarray, Z: np.ndarray, det: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Batched eq. 5-13: R (s,3,3) with det(R) = det (s,), T (s,3) minimising sum |R y_i + T - z_i|^2 for
-    Y (n,3) and Z (s,n,3)."""
-    my = Y.mean(axis=0)
-    mz = Z.mean(axis=1)
-    H = np.einsum("ni,snj->sij", Y - my, Z - mz[:, None, :])
-    U, _, Vt = np.linalg.svd(H)
-    V, Ut = Vt.transpose(0, 2, 1), U.transpose(0, 2, 1)
-    d = np.sign(np.linalg.det(V @ Ut))
-    d[d == 0] = 1.0
-    Dg = np.ones((len(H), 1, 3))
-    Dg[:, 0, 2] = d * det
-    R = (V * Dg) @ Ut  # V diag(1, 1, d det) U^T
-    T = mz - np.einsum("sij,j->si", R, my)
-    return R, T
-
-
-def icp(X, Y, iterations: int = 50, starts: int = 48, rng=0, tol: float = 1e-12):
-    """Iterative closest points (eqs. 5-12..5-14): Y (n,3) moved onto X (m,3).
-
-    From every orientation of `start_rotations` (``starts`` of them, translation matching the centroids) at
-    once: pair each moved y_i with its closest x (Z, eq. 5-12), refit (R, T) to the pairs (eq. 5-13), at most
-    ``iterations`` times or until no start's error moves by more than ``tol``.  Returns (R (3,3), T (3,),
-    error) of the best start, error = RMS over i of |R y_i + T - z_i| (eq. 5-14) with z_i the closest x."""
-    X = _finite_points(X, 3, "the points to match (X)")
-    Y = _finite_points(Y, 3, "the points to move (Y)")
-    if len(X) == 0 or len(Y) == 0:
-        raise BolusError("icp needs at least one point in each set")
-    if int(iterations) < 0:
-        raise BolusError(f"iterations must be >= 0, got {iterations}")
-    R = start_rotations(starts, rng)
-    det = np.sign(np.linalg.det(R))
-    T = X.mean(axis=0) - np.einsum("sij,j->si", R, Y.mean(axis=0))
-    tree = cKDTree(X)
-    s, n = len(R), len(Y)
-
-    def pair(R, T):
-        moved = np.einsum("sij,nj->sni", R, Y) + T[:, None, :]
-        d, j = tree.query(moved.reshape(-1, 3))
-        return np.sqrt((d.reshape(s, n) ** 2).mean(axis=1)), X[j.reshape(s, n)]
-
-    err, Z = pair(R, T)
-    for _ in range(int(iterations)):
-        R_new, T_new = _kabsch(Y, Z, det)
-        err_new, Z_new = pair(R_new, T_new)
-        better = err_new <= err  # a start never gets worse (guards against round-off)
-        R[better], T[better], Z[better] = R_new[better], T_new[better], Z_new[better]
-        moved = float(np.abs(err - np.where(better, err_new, err)).max())
-        err = np.where(better, err_new, err)
-        if moved <= tol:
-            break
-    b = int(np.argmin(err))
-    return R[b], T[b], float(err[b])
-
-
-def dissimilarity(a, b, count: int = SAMPLES, iterations: int = 50, starts: int = 48) -> float:
-    """Symmetric dissimilarity of two skeletons (module doc, 5.3): a and b are `Skeleton`s or their
-    `skeleton_samples` (count,3); the mean of the RMS errors (eq. 5-14) of ICP a->b and b->a."""
-    A = skeleton_samples(a, count) if isinstance(a, Skeleton) else _finite_points(a, 3, "skeleton samples")
-    B = skeleton_samples(b, count) if isinstance(b, Skeleton) else _finite_points(b, 3, "skeleton samples")
-    return 0.5 * (icp(A, B, iterations, starts)[2] + icp(B, A, iterations, starts)[2])
