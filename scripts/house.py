@@ -6,7 +6,7 @@
 
 Imports are read with ``ast`` (those inside functions count too), so nothing is imported or
 run.  The caps are the project's: core modules <= 500 lines, Blender-layer modules <= 300,
-functions <= 80, no import cycle, no upward import between the core's stages
+functions <= 80, module docstrings <= 25 (design notes go to docs/design/), no import cycle, no upward import between the core's stages
 (`tests/test_layout.py` checks the same with `layout_rules`), no issue numbers in code,
 tests, benchmarks or scripts, and no tracked file that points outside the repository.
 """
@@ -24,6 +24,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "bolus_addon"
 CORE_MODULE_MAX, BLENDER_MODULE_MAX, FUNCTION_MAX = 500, 300, 80
+DOCSTRING_MAX = 25  #: lines of a module docstring; design notes go to docs/design/<stage>.md
 #: the core's stages, each with the stages it may import (besides itself and the shared basics)
 STAGES = {
     "mesh": set(),
@@ -179,6 +180,16 @@ def sizes(root: Path = ROOT) -> tuple[list[tuple[int, str, int]], list[tuple[int
     return sorted(mods, reverse=True), sorted(funcs, reverse=True)
 
 
+def long_docstrings(root: Path = ROOT) -> list[tuple[int, str]]:
+    """[(lines, module)] of the module docstrings over DOCSTRING_MAX lines, longest first."""
+    out = []
+    for name, f in module_files(root).items():
+        doc = ast.get_docstring(ast.parse(f.read_text(encoding="utf-8")), clean=False)
+        if doc and doc.count("\n") + 1 > DOCSTRING_MAX:
+            out.append((doc.count("\n") + 1, name))
+    return sorted(out, reverse=True)
+
+
 def tracked_files(root: Path = ROOT) -> list[Path]:
     try:
         out = subprocess.run(["git", "ls-files"], cwd=root, capture_output=True, text=True, check=True).stdout
@@ -218,6 +229,7 @@ def report(root: Path = ROOT) -> dict:
         "cycles": cycles(graph), "layout_violations": layout_violations(graph), "bpy_in_core": bpy_in_core(root),
         "modules_over_cap": [(n, m, c) for n, m, c in mods if n > c], "longest_modules": mods[:10],
         "functions_over_cap": [(n, m, fn) for n, m, fn in funcs if n > FUNCTION_MAX], "longest_functions": funcs[:10],
+        "long_docstrings": long_docstrings(root),
         "issue_references": issue, "outside_references": outside,
     }
 
@@ -225,7 +237,8 @@ def report(root: Path = ROOT) -> dict:
 def broken(r: dict) -> list[str]:
     checks = [("import cycles", r["cycles"]), ("imports against the layout", r["layout_violations"]),
               ("Blender imports in the core", r["bpy_in_core"]), ("modules over their cap", r["modules_over_cap"]),
-              ("functions over 80 lines", r["functions_over_cap"]), ("issue-number references", r["issue_references"]),
+              ("functions over 80 lines", r["functions_over_cap"]),
+              (f"module docstrings over {DOCSTRING_MAX} lines", r["long_docstrings"]), ("issue-number references", r["issue_references"]),
               ("references outside the repository", r["outside_references"])]
     out = [f"{len(v)} {what}" for what, v in checks if v]
     if len(r["basics"]) > BASICS_MAX:
@@ -257,6 +270,9 @@ def main(argv=None) -> int:
     print(f"longest functions (cap {FUNCTION_MAX} lines):")
     for n, m, fn in r["longest_functions"]:
         print(f"    {n:5d}  {short(m)}.{fn}{'  OVER' if n > FUNCTION_MAX else ''}")
+    print(f"module docstrings over {DOCSTRING_MAX} lines (design notes: docs/design/): {len(r['long_docstrings'])}")
+    for n, m in r["long_docstrings"]:
+        print(f"    {n:5d}  {short(m)}")
     print(f"issue-number references in code, tests, benchmarks, scripts: {len(r['issue_references'])}")
     for h in r["issue_references"][:10]:
         print("   ", h)
