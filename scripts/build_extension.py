@@ -14,7 +14,8 @@ This script
    the versions in the venv), and the pattern export's pure-Python wheels (py3-none-any:
    ezdxf, fpdf2, fonttools, defusedxml, pyparsing, typing_extensions, at the versions in
    requirements.txt; no Pillow), into a cache folder;
-2. stages the extension (manifest, root __init__.py, LICENSE, README.md, bolus_addon/)
+2. stages the extension (the files the manifest's paths_exclude_pattern keeps: root __init__.py,
+   LICENSE, README.md, bolus_addon/, assets/print_sae.npz)
    with those wheels, adding ``platforms`` and ``wheels`` to the staged manifest;
 3. runs Blender's own builder (from the bpy in the venv) with ``--split-platforms``:
    one ``bolus-<version>-<platform>.zip`` per platform in the output folder, and checks
@@ -107,6 +108,31 @@ def staged_manifest(manifest: str, platforms: list[str], wheels: list[str]) -> s
     extra += "wheels = [\n" + "".join(f'  "./wheels/{w}",\n' for w in wheels) + "]\n"
     head, sep, tail = manifest.partition("\n[")  # top-level keys must come before the first table
     return head + "\n" + extra + sep + tail
+
+
+def shipped_files() -> list[str]:
+    """The repository's files (relative POSIX paths) that the manifest's ``paths_exclude_pattern``
+    lets into the extension, as Blender's own builder matches them (so the platform zips hold
+    what ``make extension`` holds: the package, the manifest, and assets/print_sae.npz)."""
+    import importlib.util
+    import tomllib
+
+    import bpy
+
+    cli = Path(bpy.utils.system_resource("SCRIPTS")) / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
+    spec = importlib.util.spec_from_file_location("blender_ext_cli", cli)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    manifest = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
+    match = mod.PathPatternMatch(manifest["build"]["paths_exclude_pattern"])
+    try:
+        listed = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+        files = [f for f in listed.splitlines() if (ROOT / f).is_file()]
+    except (OSError, subprocess.CalledProcessError):
+        files = [p.relative_to(ROOT).as_posix() for p in ROOT.rglob("*") if p.is_file()]
+    return sorted(f for f in files if f != "blender_manifest.toml"
+                  and not any(match.test_path("/".join(f.split("/")[:i]) + "/") for i in range(1, f.count("/") + 1))
+                  and not match.test_path(f))
 
 
 def zip_wheel_tags(path: Path) -> dict[str, set[str]]:
@@ -308,9 +334,9 @@ def main() -> int:
     stage = ROOT / "build" / "stage"
     shutil.rmtree(stage, ignore_errors=True)
     (stage / "wheels").mkdir(parents=True)
-    for name in ("__init__.py", "LICENSE", "README.md"):
-        shutil.copy2(ROOT / name, stage / name)
-    shutil.copytree(ROOT / "bolus_addon", stage / "bolus_addon", ignore=shutil.ignore_patterns("__pycache__"))
+    for rel in shipped_files():
+        (stage / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(ROOT / rel, stage / rel)
     wanted = {f"{n.replace('-', '_')}-{pins[n][tag]}-{tag}" for n in BINARY for tag in PYTHONS}
     found = sorted({w for d in folders for w in d.glob("*.whl")
                     if d.name == "any" or "-".join(w.name.split("-")[:3]) in wanted}, key=lambda w: w.name)

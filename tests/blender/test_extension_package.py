@@ -68,6 +68,13 @@ def test_zip_holds_the_addon_and_no_dev_files(built_zip):
     assert sorted(n for n in names if n.startswith("assets/")) == ["assets/print_sae.npz"], names
 
 
+def test_platform_zips_stage_what_the_plain_zip_holds(built_zip):
+    """`make extension-wheels` stages the files the manifest keeps, the same the builder packs
+    into the plain zip (the trained auto-encoder included), plus the wheels."""
+    names = {n for n in zipfile.ZipFile(built_zip).namelist() if not n.endswith("/")}
+    assert set(build_extension.shipped_files()) | {"blender_manifest.toml"} == names
+
+
 def test_manifest_keeps_every_generated_folder_out_of_the_zip():
     """What the repository ignores (venvs, out/, and dist/ and build/ of `make extension-wheels`:
     hundreds of MB of zips and wheels) is excluded by the builder's own pattern matcher."""
