@@ -53,7 +53,6 @@ def test_at_most_six_shared_basics_sit_directly_in_the_core(report):
 KNOWN_OVER = {
     "bolus_addon.core.unfold.unfold",
     "bolus_addon.core.solid.parts.split_solid",
-    "bolus_addon.core.improve.lpso.lpso_steps",
     "bolus_addon.core.solid.shell.make_shell",
     "bolus_addon.core.unfold.unfold.unfold_patch",
     "bolus_addon.core.retrieval.spectral_skeleton.skeleton",

@@ -162,6 +162,168 @@ def _offsets(a, n: int, name: str) -> np.ndarray:
     return a
 
 
+def _integer_arg(name: str, v, lo: int) -> int:
+    """v as an int >= lo, or `BolusError` naming the argument."""
+    try:
+        ok = int(v) == v and v >= lo
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise BolusError(f"{name} must be an integer >= {lo}, got {v!r}")
+    return int(v)
+
+
+def _check_arguments(obj, d0, upper, particles, iterations, eps, max_iterations, top_fraction, chunk):
+    """The input checks of `lpso_steps`; returns (d0 (n,), upper (n,), eps, P, T, max_iterations, chunk)."""
+    n = int(obj.n)
+    d0 = _offsets(d0, n, "d0")
+    upper = _offsets(upper, n, "upper")
+    if (upper < 0).any():
+        i = int(np.nonzero(upper < 0)[0][0])
+        raise BolusError(f"upper must be >= 0 (the largest offset, mm), got {upper[i]} at vertex {i}")
+    counts = [_integer_arg(name, v, lo) for name, v, lo in (
+        ("particles", particles, 2), ("iterations", iterations, 1), ("max_iterations", max_iterations, 1),
+        ("chunk", chunk, 1))]
+    try:
+        eps = float(eps)
+    except (TypeError, ValueError):
+        eps = np.nan
+    if not (np.isfinite(eps) and eps >= 0):
+        raise BolusError(f"eps must be a finite number >= 0, got {eps}")
+    if not (0.0 < float(top_fraction) <= 1.0):
+        raise BolusError(f"top_fraction must be in (0, 1], got {top_fraction}")
+    return (d0, upper, eps, *counts)
+
+
+class _Search:
+    """The state of one L-PSO run across its rounds: the accepted offsets d (n,) mm with J(d)
+    (Gbest^k, eq. 4-21), the box 0 <= d <= upper (n,) mm, the selection's inputs and the
+    `LPSOState` that is yielded."""
+
+    def __init__(self, obj, d0, upper, rng, P: int, max_iterations: int, top_fraction: float, chunk: int):
+        self.obj, self.P, self.max_iterations, self.chunk = obj, P, max_iterations, chunk
+        self.top_fraction = float(top_fraction)
+        self.g = np.random.default_rng(rng)
+        self.movable = _movable_mask(obj)
+        self.interior = np.asarray(obj.interior, dtype=bool)
+        self.upper = np.where(self.movable, upper, 0.0)   # non-movable vertices stay put
+        self.d = np.clip(d0, 0.0, self.upper)              # d0 projected onto the box
+        self.adj = _adjacency(obj.F, int(obj.n))
+        self.J = float(obj.value(self.d))
+        self.st = LPSOState(d=self.d.copy(), value=self.J, evaluations=1, history=[self.J])
+
+    def select(self) -> np.ndarray:
+        """Algorithm 4-1 on the current surface, less the vertices whose box is empty: (k,) ids."""
+        nodes = _select(np.asarray(self.obj.theta(self.d), dtype=float), self.d, self.interior, self.movable,
+                        self.adj, self.top_fraction)
+        return nodes[self.upper[nodes] > 0]
+
+    def best_so_far(self, swarm: "_Swarm") -> None:
+        """st.d / st.value := the better of Gbest^{k-1} and the running gbest of the swarm."""
+        st = self.st
+        st.d = self.d.copy()
+        st.value = self.J
+        if swarm.gf < self.J:
+            st.d[swarm.nodes] = swarm.gX
+            st.value = float(swarm.gf)
+
+    def accept(self, swarm: "_Swarm") -> float | None:
+        """Lines 17-18 after T iterations: Gbest^k = gbest if it is better, checked with one exact
+        ``obj.value``; returns the gain J(Gbest^{k-1}) - J(Gbest^k), or None (no real gain)."""
+        if not swarm.gf < self.J:
+            return None
+        dn = self.d.copy()
+        dn[swarm.nodes] = swarm.gX
+        Jn = float(self.obj.value(dn))
+        self.st.evaluations += 1
+        if not Jn < self.J:
+            swarm.gf = self.J  # batch_values rounding: not a real gain
+            return None
+        gain = self.J - Jn
+        self.d, self.J = dn, Jn
+        self.st.rounds += 1
+        self.st.history.append(Jn)
+        return gain
+
+
+class _Swarm:
+    """One round's particles over the ABSOLUTE offsets of the k selected nodes (Algorithm 4-2):
+    X, Vel, pbest (P,k) mm, pf (P,) J of the own bests, gX (k,) / gf the swarm's best; the box
+    of every node is [0, hi]."""
+
+    def __init__(self, search: _Search, nodes: np.ndarray):
+        P, k, g = search.P, len(nodes), search.g
+        self.nodes = nodes
+        self.hi = search.upper[nodes]                   # (k,) box widths (lower bound 0)
+        self.vmax = VMAX * self.hi
+        x0 = search.d[nodes]
+        # particle 0 at the current offsets (a round never makes J worse), the others around them
+        self.X = np.clip(x0 + g.uniform(-INIT_SPREAD, INIT_SPREAD, (P, k)) * self.hi, 0.0, self.hi)
+        self.X[0] = x0
+        self.Vel = g.uniform(-VELOCITY0, VELOCITY0, (P, k)) * self.hi
+        f = np.asarray(search.obj.batch_values(search.d, nodes, self.X), dtype=float)
+        search.st.evaluations += P
+        self.pbest, self.pf = self.X.copy(), f.copy()
+        ib = int(np.argmin(self.pf))
+        self.gX, self.gf = self.pbest[ib].copy(), float(self.pf[ib])
+
+    def step(self, search: _Search) -> None:
+        """One swarm iteration, lines 9-14: velocities (constriction values, clamped to +- VMAX x
+        the box width), positions clipped to the box, all P candidates evaluated at once."""
+        P, k = self.X.shape
+        r1 = search.g.random((P, k))
+        r2 = search.g.random((P, k))
+        self.Vel *= PSO_W
+        self.Vel += PSO_C1 * r1 * (self.pbest - self.X) + PSO_C2 * r2 * (self.gX - self.X)   # line 9
+        np.clip(self.Vel, -self.vmax, self.vmax, out=self.Vel)
+        self.X += self.Vel                                                                   # line 10
+        np.clip(self.X, 0.0, self.hi, out=self.X)
+        f = np.asarray(search.obj.batch_values(search.d, self.nodes, self.X), dtype=float)
+        better = f < self.pf                                                                 # line 13
+        self.pbest[better] = self.X[better]
+        self.pf[better] = f[better]
+        ib = int(np.argmin(self.pf))                                                         # line 14
+        if self.pf[ib] < self.gf:
+            self.gX, self.gf = self.pbest[ib].copy(), float(self.pf[ib])
+
+    def collapsed(self) -> bool:
+        """Every particle within STALL x the box width of gbest and no faster: nothing new to find."""
+        width = self.hi.max()
+        return np.abs(self.X - self.gX).max() <= STALL * width and np.abs(self.Vel).max() <= STALL * width
+
+
+def _round(search: _Search, nodes: np.ndarray, T: int):
+    """One round k of Algorithm 4-2 on the selected nodes (k,): swarm iterations until a gain
+    is accepted after T of them (else T = T + T, line 20), the swarm collapses or the
+    iteration cap is reached.  Yields a snapshot every ``chunk`` iterations; returns the
+    accepted gain, or None."""
+    st = search.st
+    swarm = _Swarm(search, nodes)
+    t, gain = 0, None
+    while True:
+        swarm.step(search)
+        t += 1
+        st.iterations += 1
+        st.evaluations += search.P
+        end_swarm = st.iterations >= search.max_iterations
+        if t >= T:
+            gain = search.accept(swarm)
+            end_swarm = end_swarm or gain is not None
+            if not end_swarm:
+                if swarm.collapsed():
+                    end_swarm = True
+                else:
+                    T += T                                                       # line 20
+                    st.doublings += 1
+        if st.iterations % search.chunk == 0:
+            search.best_so_far(swarm)
+            yield st.snapshot()
+        if end_swarm:
+            break
+    search.best_so_far(swarm)
+    return gain
+
+
 def lpso_steps(obj, d0, upper, *, rng=0, particles: int = 30, iterations: int = 200, eps: float = 1e-4,
                max_iterations: int = 20000, top_fraction: float = 0.3, chunk: int = 50):
     """Algorithm 4-2 (L-PSO) as a generator of `LPSOState` snapshots.
@@ -194,126 +356,28 @@ def lpso_steps(obj, d0, upper, *, rng=0, particles: int = 30, iterations: int = 
     Yields a snapshot every ``chunk`` swarm iterations and a last one with done=True;
     ``state.d`` is always the best offsets found so far (an interrupted run keeps it).
     """
-    n = int(obj.n)
-    d0 = _offsets(d0, n, "d0")
-    upper = _offsets(upper, n, "upper")
-    if (upper < 0).any():
-        i = int(np.nonzero(upper < 0)[0][0])
-        raise BolusError(f"upper must be >= 0 (the largest offset, mm), got {upper[i]} at vertex {i}")
-    for name, v, lo in (("particles", particles, 2), ("iterations", iterations, 1),
-                        ("max_iterations", max_iterations, 1), ("chunk", chunk, 1)):
-        try:
-            ok = int(v) == v and v >= lo
-        except (TypeError, ValueError, OverflowError):
-            ok = False
-        if not ok:
-            raise BolusError(f"{name} must be an integer >= {lo}, got {v!r}")
-    try:
-        eps = float(eps)
-    except (TypeError, ValueError):
-        eps = np.nan
-    if not (np.isfinite(eps) and eps >= 0):
-        raise BolusError(f"eps must be a finite number >= 0, got {eps}")
-    if not (0.0 < float(top_fraction) <= 1.0):
-        raise BolusError(f"top_fraction must be in (0, 1], got {top_fraction}")
-    P, T0, chunk, max_iterations = int(particles), int(iterations), int(chunk), int(max_iterations)
-    g = np.random.default_rng(rng)
-
-    movable = _movable_mask(obj)
-    interior = np.asarray(obj.interior, dtype=bool)
-    upper = np.where(movable, upper, 0.0)
-    d = np.clip(d0, 0.0, upper)
-    adj = _adjacency(obj.F, n)
-    J = float(obj.value(d))
-    st = LPSOState(d=d.copy(), value=J, evaluations=1, history=[J])
-
-    def best_so_far(nodes, gX, gf):
-        """st.d / st.value := the better of Gbest^{k-1} and the running gbest."""
-        st.d = d.copy()
-        st.value = J
-        if gf < J:
-            st.d[nodes] = gX
-            st.value = float(gf)
-
+    d0, upper, eps, P, T0, max_iterations, chunk = _check_arguments(
+        obj, d0, upper, particles, iterations, eps, max_iterations, top_fraction, chunk)
+    search = _Search(obj, d0, upper, rng, P, max_iterations, top_fraction, chunk)
+    st = search.st
     while True:
         if st.iterations >= max_iterations:
             st.stop = "max_iterations"
             break
-        nodes = _select(np.asarray(obj.theta(d), dtype=float), d, interior, movable, adj, float(top_fraction))
-        nodes = nodes[upper[nodes] > 0]
+        nodes = search.select()
         st.selected = len(nodes)
         if len(nodes) == 0:
             st.stop = "nothing to move"
             break
-        k = len(nodes)
-        hi = upper[nodes]                                  # (k,) box widths (lower bound 0)
-        vmax = VMAX * hi
-        x0 = d[nodes]
-        X = np.clip(x0 + g.uniform(-INIT_SPREAD, INIT_SPREAD, (P, k)) * hi, 0.0, hi)
-        X[0] = x0
-        Vel = g.uniform(-VELOCITY0, VELOCITY0, (P, k)) * hi
-        f = np.asarray(obj.batch_values(d, nodes, X), dtype=float)
-        st.evaluations += P
-        pbest, pf = X.copy(), f.copy()
-        ib = int(np.argmin(pf))
-        gX, gf = pbest[ib].copy(), float(pf[ib])
-        T, t = T0, 0
-        gain = None
-        while True:
-            r1 = g.random((P, k))
-            r2 = g.random((P, k))
-            Vel *= PSO_W
-            Vel += PSO_C1 * r1 * (pbest - X) + PSO_C2 * r2 * (gX - X)   # line 9
-            np.clip(Vel, -vmax, vmax, out=Vel)
-            X += Vel                                                     # line 10
-            np.clip(X, 0.0, hi, out=X)
-            f = np.asarray(obj.batch_values(d, nodes, X), dtype=float)
-            better = f < pf                                              # line 13
-            pbest[better] = X[better]
-            pf[better] = f[better]
-            ib = int(np.argmin(pf))                                      # line 14
-            if pf[ib] < gf:
-                gX, gf = pbest[ib].copy(), float(pf[ib])
-            t += 1
-            st.iterations += 1
-            st.evaluations += P
-            at_cap = st.iterations >= max_iterations
-            end_swarm = at_cap
-            if t >= T:
-                if gf < J:                                               # lines 17-18
-                    dn = d.copy()
-                    dn[nodes] = gX
-                    Jn = float(obj.value(dn))
-                    st.evaluations += 1
-                    if Jn < J:
-                        gain = J - Jn
-                        d, J = dn, Jn
-                        st.rounds += 1
-                        st.history.append(J)
-                        end_swarm = True
-                    else:
-                        gf = J  # batch_values rounding: not a real gain
-                if not end_swarm:
-                    width = hi.max()
-                    if np.abs(X - gX).max() <= STALL * width and np.abs(Vel).max() <= STALL * width:
-                        end_swarm = True                                 # collapsed: nothing new to find
-                    else:
-                        T += T                                           # line 20
-                        st.doublings += 1
-            if st.iterations % chunk == 0:
-                best_so_far(nodes, gX, gf)
-                yield st.snapshot()
-            if end_swarm:
-                break
-        best_so_far(nodes, gX, gf)
+        gain = yield from _round(search, nodes, T0)
         if gain is None:
             st.stop = "max_iterations" if st.iterations >= max_iterations else "stalled"
             break
         if gain < eps * max(abs(st.history[-2]), 1e-300):                # line 24
             st.stop = "converged"
             break
-    st.d = d.copy()
-    st.value = J
+    st.d = search.d.copy()
+    st.value = search.J
     st.done = True
     yield st.snapshot()
 
