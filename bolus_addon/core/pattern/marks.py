@@ -159,6 +159,95 @@ def _mark_place(UV, ca, cb, third_a, third_b):
     return tuple(out)
 
 
+def _check_input(UV, F, piece, source_vertex):
+    """The input checks of `pattern_marks`: (UV (n,2) mm, F (m,3), piece (m,), sv (n,))."""
+    UV = np.asarray(UV, dtype=np.float64)
+    if UV.ndim == 2 and UV.shape[1] > 2:
+        UV = UV[:, :2]
+    UV, F = as_pattern_arrays(UV, F)
+    piece = np.asarray(piece)
+    sv = np.asarray(source_vertex)
+    if piece.shape != (len(F),) or not np.issubdtype(piece.dtype, np.integer):
+        raise BolusError(f"the pattern needs one integer piece per triangle ({len(F)}), got shape {piece.shape}")
+    if sv.shape != (len(UV),) or not np.issubdtype(sv.dtype, np.integer):
+        raise BolusError(f"the pattern needs one integer source vertex per vertex ({len(UV)}), got shape {sv.shape}")
+    return UV, F, piece, sv
+
+
+def _shared_edges(E, tri, piece, sv) -> dict:
+    """Outline edges that were one source edge, grouped by the (sorted) pair of pieces:
+    {(pa, pb): {(s0, s1) source edge: (i, j) its two outline edges, i on piece pa}}.
+    A source edge found on the outline other than exactly twice is left out."""
+    skey = np.sort(sv[E], axis=1)
+    groups: dict[tuple[int, int], list[int]] = {}
+    for i, k in enumerate(map(tuple, skey.tolist())):
+        if k[0] != k[1]:
+            groups.setdefault(k, []).append(i)
+    by_pair: dict[tuple[int, int], dict[tuple[int, int], tuple[int, int]]] = {}
+    for k, idx in groups.items():
+        if len(idx) != 2:
+            continue
+        i, j = idx
+        pi, pj = int(piece[tri[i]]), int(piece[tri[j]])
+        if pi > pj:
+            i, j, pi, pj = j, i, pj, pi
+        by_pair.setdefault((pi, pj), {})[k] = (i, j)
+    return by_pair
+
+
+def _side_vertex(E, sv, e: int, s: int) -> int:
+    """The pattern vertex of outline edge e at source vertex s."""
+    return int(E[e, 0] if sv[E[e, 0]] == s else E[e, 1])
+
+
+def _connected_runs(E, sv, path: list[int], pairs: list[list[int]], same_piece: bool) -> list[tuple[int, int]]:
+    """A source path's edge pairs (one [side 0, side 1] per edge) split into runs [r0, r1) along
+    which both sides stay connected (a chain may run on through another outline); within one
+    piece the pairs are first ordered (in place) so that each side is connected."""
+    if same_piece:
+        for q in range(1, len(pairs)):
+            s = path[q]
+            if _side_vertex(E, sv, pairs[q][0], s) != _side_vertex(E, sv, pairs[q - 1][0], s):
+                pairs[q].reverse()
+    runs, start = [], 0
+    for q in range(1, len(pairs)):
+        s = path[q]
+        if any(_side_vertex(E, sv, pairs[q][c], s) != _side_vertex(E, sv, pairs[q - 1][c], s) for c in (0, 1)):
+            runs.append((start, q))
+            start = q
+    runs.append((start, len(pairs)))
+    return runs
+
+
+def _run_chains(E, sv, third, path, pairs, r0: int, r1: int):
+    """The two sides of run [r0, r1): chains (k,) of pattern vertex ids in the source path's order,
+    and for each edge the third vertex of its triangle (the piece's side)."""
+    chains, thirds = [], []
+    for c in (0, 1):
+        ch = [_side_vertex(E, sv, pairs[q][c], path[q]) for q in range(r0, r1)]
+        ch.append(_side_vertex(E, sv, pairs[r1 - 1][c], path[r1]))
+        chains.append(np.array(ch, dtype=np.int64))
+        thirds.append(np.array([third[pairs[q][c]] for q in range(r0, r1)]))
+    return chains, thirds
+
+
+def _mark_run(UV, sv, pa: int, pb: int, chains, thirds, seams_raw: list, darts: list) -> None:
+    """Append the run's mark: a dart (within one piece, the sides meet at one end only: the
+    apex), nothing (a slit closed at both ends) or a seam / join with its tick places."""
+    ca, cb = chains
+    if pa == pb and (ca[0] == cb[0]) != (ca[-1] == cb[-1]):
+        if ca[0] == cb[0]:
+            ca, cb = ca[::-1], cb[::-1]
+        darts.append((pa, int(sv[ca[-1]]), DartMark(pa, int(ca[-1]), ca, cb)))
+        return
+    if pa == pb and ca[0] == cb[0]:  # a slit closed at both ends: nothing to match apart
+        return
+    mid_a, n_a, mid_b, n_b = _mark_place(UV, ca, cb, thirds[0], thirds[1])
+    seams_raw.append(((pa, pb, int(sv[np.concatenate([ca])].min())),
+                      dict(piece_a=pa, piece_b=pb, chain_a=ca, chain_b=cb, mid_a=mid_a, mid_b=mid_b,
+                           normal_a=n_a, normal_b=n_b)))
+
+
 def pattern_marks(UV, F, piece, source_vertex) -> PatternMarks:
     """Seams, joins and darts of the pattern mesh.
 
@@ -175,77 +264,19 @@ def pattern_marks(UV, F, piece, source_vertex) -> PatternMarks:
     smallest source vertex of the chain); darts in the order (piece, apex's source vertex).
     A source edge found on the outline more than twice is left unmarked (ambiguous).
     """
-    UV = np.asarray(UV, dtype=np.float64)
-    if UV.ndim == 2 and UV.shape[1] > 2:
-        UV = UV[:, :2]
-    UV, F = as_pattern_arrays(UV, F)
-    piece = np.asarray(piece)
-    sv = np.asarray(source_vertex)
-    if piece.shape != (len(F),) or not np.issubdtype(piece.dtype, np.integer):
-        raise BolusError(f"the pattern needs one integer piece per triangle ({len(F)}), got shape {piece.shape}")
-    if sv.shape != (len(UV),) or not np.issubdtype(sv.dtype, np.integer):
-        raise BolusError(f"the pattern needs one integer source vertex per vertex ({len(UV)}), got shape {sv.shape}")
+    UV, F, piece, sv = _check_input(UV, F, piece, source_vertex)
     if len(F) == 0:
         return PatternMarks([], [], UV.copy())
     E, tri = _boundary_edges(F)
     third = F[tri].sum(axis=1) - E.sum(axis=1)
-    skey = np.sort(sv[E], axis=1)
-    groups: dict[tuple[int, int], list[int]] = {}
-    for i, k in enumerate(map(tuple, skey.tolist())):
-        if k[0] != k[1]:
-            groups.setdefault(k, []).append(i)
-    # source edge -> its two outline edges, grouped by the (sorted) pair of pieces
-    by_pair: dict[tuple[int, int], dict[tuple[int, int], tuple[int, int]]] = {}
-    for k, idx in groups.items():
-        if len(idx) != 2:
-            continue
-        i, j = idx
-        pi, pj = int(piece[tri[i]]), int(piece[tri[j]])
-        if pi > pj:
-            i, j, pi, pj = j, i, pj, pi
-        by_pair.setdefault((pi, pj), {})[k] = (i, j)
-
-    def side_vertex(e, s):
-        """The pattern vertex of outline edge e at source vertex s."""
-        return int(E[e, 0] if sv[E[e, 0]] == s else E[e, 1])
-
     seams_raw, darts = [], []
-    for (pa, pb), edges in sorted(by_pair.items()):
+    for (pa, pb), edges in sorted(_shared_edges(E, tri, piece, sv).items()):
         for path in _paths(list(edges)):
             src_edges = [tuple(sorted((path[q], path[q + 1]))) for q in range(len(path) - 1)]
             pairs = [list(edges[k]) for k in src_edges]
-            if pa == pb:  # both sides in one piece: order them so each side is connected
-                for q in range(1, len(pairs)):
-                    s = path[q]
-                    if side_vertex(pairs[q][0], s) != side_vertex(pairs[q - 1][0], s):
-                        pairs[q].reverse()
-            # split where a side is not connected (the chain runs on through another outline)
-            runs, start = [], 0
-            for q in range(1, len(pairs)):
-                s = path[q]
-                if any(side_vertex(pairs[q][c], s) != side_vertex(pairs[q - 1][c], s) for c in (0, 1)):
-                    runs.append((start, q))
-                    start = q
-            runs.append((start, len(pairs)))
-            for r0, r1 in runs:
-                chains, thirds = [], []
-                for c in (0, 1):
-                    ch = [side_vertex(pairs[q][c], path[q]) for q in range(r0, r1)]
-                    ch.append(side_vertex(pairs[r1 - 1][c], path[r1]))
-                    chains.append(np.array(ch, dtype=np.int64))
-                    thirds.append(np.array([third[pairs[q][c]] for q in range(r0, r1)]))
-                ca, cb = chains
-                if pa == pb and (ca[0] == cb[0]) != (ca[-1] == cb[-1]):
-                    if ca[0] == cb[0]:
-                        ca, cb = ca[::-1], cb[::-1]
-                    darts.append((pa, int(sv[ca[-1]]), DartMark(pa, int(ca[-1]), ca, cb)))
-                    continue
-                if pa == pb and ca[0] == cb[0]:  # a slit closed at both ends: nothing to match apart
-                    continue
-                mid_a, n_a, mid_b, n_b = _mark_place(UV, ca, cb, thirds[0], thirds[1])
-                seams_raw.append(((pa, pb, int(sv[np.concatenate([ca])].min())),
-                                  dict(piece_a=pa, piece_b=pb, chain_a=ca, chain_b=cb, mid_a=mid_a, mid_b=mid_b,
-                                       normal_a=n_a, normal_b=n_b)))
+            for r0, r1 in _connected_runs(E, sv, path, pairs, pa == pb):
+                chains, thirds = _run_chains(E, sv, third, path, pairs, r0, r1)
+                _mark_run(UV, sv, pa, pb, chains, thirds, seams_raw, darts)
     seams_raw.sort(key=lambda t: t[0])
     seams = [Seam(number=i + 1, **kw) for i, (_, kw) in enumerate(seams_raw)]
     darts.sort(key=lambda t: t[:2])
