@@ -56,7 +56,6 @@ KNOWN_OVER = {
     "bolus_addon.core.solid.shell.make_shell",
     "bolus_addon.core.unfold.unfold.unfold_patch",
     "bolus_addon.core.retrieval.spectral_skeleton.skeleton",
-    "bolus_addon.core.pattern.drawing.pattern_drawing",
     "bolus_addon.core.solid.distance_field.__init__",
 }
 

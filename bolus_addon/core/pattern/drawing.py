@@ -25,11 +25,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..mesh.boundary import boundary_loops
 from ..errors import BolusError
 from ..unfold.overlap import as_pattern_arrays
+from .label_place import (  # noqa: F401  (the label constants stay importable from here)
+    LABEL_CENTROIDS, LABEL_FILL, LABEL_GRID, LABEL_KEEP, LABEL_MIN_SCALE, OUTLINE_SAMPLES, label_place)
 from .polygon_offset import offset_polygon, signed_area, winding_numbers
 
 __all__ = [
@@ -68,16 +69,6 @@ TICK_MM, NUMBER_INSET_MM = 2.5, 5.5
 KEEP_OUT_MM = 3.5
 #: a dart's dashed legs are drawn this far inside its opening (so they do not hide under the cut line)
 DART_INSET_MM = 1.5
-#: a label never shrinks below this share of its size to fit a small piece
-LABEL_MIN_SCALE = 0.4
-#: label candidates: a LABEL_GRID x LABEL_GRID grid over the piece, and at most this many centroids
-LABEL_GRID, LABEL_CENTROIDS = 40, 2000
-#: the outline is sampled this finely (a share of its length) to measure the room around a label
-OUTLINE_SAMPLES = 5000
-#: label candidates kept: this many farthest from the outline and as many near the centre and roomy
-LABEL_KEEP = 60
-#: a label fills at most this share of the free room around it
-LABEL_FILL = 0.9
 #: text width per character, in font sizes (bold label, regular metrics line; sans-serif)
 CHAR_W_BOLD, CHAR_W_REGULAR = 0.62, 0.55
 #: paper sizes (mm, portrait) of the tiled PDF; 'NONE' = one page the drawing's size
@@ -145,75 +136,6 @@ def _seam_loops(loops: list[np.ndarray], d: float) -> list[np.ndarray]:
             if len(S):
                 seams.append(S[::-1])
     return seams
-
-
-# --------------------------------------------------------------------------- labels
-def _centroid(P: np.ndarray) -> np.ndarray:
-    """Area centroid (2,) of the closed polygon P (k,2) (its mean for a polygon without area)."""
-    X = P - P.mean(axis=0)
-    cr = X[:, 0] * np.roll(X[:, 1], -1) - np.roll(X[:, 0], -1) * X[:, 1]
-    a = cr.sum() / 2
-    if abs(a) <= 1e-12:
-        return P.mean(axis=0)
-    return P.mean(axis=0) + ((X + np.roll(X, -1, axis=0)) * cr[:, None]).sum(0) / (6 * a)
-
-
-def _label_candidates(UV, F, A, B, centre):
-    """Points (c,2) inside the piece where a label may go (grid points and triangle centroids,
-    the most roomy and the nearest the centre kept), with their distances to the centre (c,)."""
-    lo, hi = A.min(axis=0), A.max(axis=0)
-    gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], LABEL_GRID + 2)[1:-1],
-                         np.linspace(lo[1], hi[1], LABEL_GRID + 2)[1:-1])
-    grid_pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
-    grid_pts = grid_pts[winding_numbers(grid_pts, A, B) == 1]
-    cand = np.concatenate([UV[F].mean(axis=1)[:: max(1, len(F) // LABEL_CENTROIDS)], grid_pts])
-    length = np.linalg.norm(B - A, axis=1)
-    step = max(length.sum() / OUTLINE_SAMPLES, 1e-6)
-    k = np.maximum(1, np.ceil(length / step).astype(np.int64))
-    seg = np.repeat(np.arange(len(A)), k)
-    t = (np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)) / np.repeat(k, k)
-    dist = cKDTree(A[seg] + t[:, None] * (B - A)[seg]).query(cand)[0]
-    off = np.linalg.norm(cand - centre, axis=1)
-    pick = np.unique(np.concatenate([np.argsort(-dist)[:LABEL_KEEP], np.argsort(off - 3 * dist)[:LABEL_KEEP]]))
-    return cand[pick], off[pick]
-
-
-def _free_room(cand, A, B, axis: int) -> np.ndarray:
-    """(c,) free length through each candidate (c,2) along ``axis``, centred on it, inside the outline A -> B."""
-    o = 1 - axis
-    lo_, hi_ = np.minimum(A[:, o], B[:, o]), np.maximum(A[:, o], B[:, o])
-    q = cand[:, None, :]
-    hit = (lo_ <= q[..., o]) & (hi_ > q[..., o])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x = A[:, axis] + (q[..., o] - A[:, o]) / (B[:, o] - A[:, o]) * (B[:, axis] - A[:, axis])
-    rel = np.where(hit, x - q[..., axis], np.nan)
-    before = np.nanmin(np.where(rel < 0, -rel, np.inf), axis=1)
-    after = np.nanmin(np.where(rel > 0, rel, np.inf), axis=1)
-    return 2 * np.minimum(before, after)
-
-
-def _label_place(UV: np.ndarray, F: np.ndarray, loops: list[np.ndarray], text_w: float, text_h: float,
-                 obstacles: list[np.ndarray] = ()):
-    """Where to put a text block of text_w x text_h mm on the island: ``(point (2,), scale)``.
-
-    Among the candidates where the text fits best (scale 1 if it fits, else shrunk to
-    the room left and right, above and below the point, never below `LABEL_MIN_SCALE`)
-    the one nearest the outer loop's centroid is taken.  ``obstacles``: clockwise loops
-    (k,2) the text keeps out of, like holes (the marks' numbers).
-    """
-    A = np.concatenate(list(loops) + list(obstacles))
-    B = np.concatenate([np.roll(L, -1, axis=0) for L in list(loops) + list(obstacles)])
-    cand, off = _label_candidates(UV, F, A, B, _centroid(loops[0]))
-    if len(obstacles):
-        free = winding_numbers(cand, A, B) == 1
-        if not free.any():
-            return _label_place(UV, F, loops, text_w, text_h)
-        cand, off = cand[free], off[free]
-    fit = np.minimum(1.0, np.minimum(LABEL_FILL * _free_room(cand, A, B, 0) / max(text_w, 1e-9),
-                                     LABEL_FILL * _free_room(cand, A, B, 1) / max(text_h, 1e-9)))
-    best = np.flatnonzero(fit >= fit.max() * (1 - 1e-9))
-    i = best[np.argmin(off[best])]
-    return cand[i], float(np.clip(fit[i], LABEL_MIN_SCALE, 1.0))
 
 
 # --------------------------------------------------------------------------- drawing
@@ -334,7 +256,7 @@ def _label_block(P: "Drawing", UV, F, loops, lines, keep_out=()) -> list:
     text_h = float((1.3 * sizes).sum())
     r = KEEP_OUT_MM
     square_cw = np.array([[-r, -r], [-r, r], [r, r], [r, -r]])
-    c, k = _label_place(UV, F, loops, text_w, text_h, [p + square_cw for p in keep_out])
+    c, k = label_place(UV, F, loops, text_w, text_h, [p + square_cw for p in keep_out])
     c = P.paper(c)[0]
     out, y = [], c[1] - k * text_h / 2
     for t, s, b, kind in lines:
@@ -395,6 +317,69 @@ def _marks_uv(marks) -> np.ndarray:
     return UVm
 
 
+def _content_box(raw, marks, has_marks: bool):
+    """(lo (2,), hi (2,), UVm) of the pattern mm box around every piece's loops and the marks'
+    chains (plus room for the ticks); UVm the marks' positions (`_marks_uv`) or None."""
+    allpts = np.concatenate([np.concatenate(r[2] + r[3]) for r in raw])
+    UVm = None
+    if has_marks:
+        UVm = _marks_uv(marks)
+        ids = [s.chain_a for s in marks.seams] + [s.chain_b for s in marks.seams]
+        ids += [np.r_[dm.leg_a, dm.leg_b] for dm in marks.darts]
+        allpts = np.concatenate([allpts, UVm[np.concatenate(ids)]])
+    lo, hi = allpts.min(axis=0), allpts.max(axis=0)
+    if has_marks:
+        lo, hi = lo - TICK_MM, hi + TICK_MM  # room for the ticks
+    return lo, hi, UVm
+
+
+def _footer_notes(has_marks: bool, title: str, label: str) -> list:
+    """The footer's text lines [(text, size mm, kind)]: print, skin side, marks, title, label."""
+    notes = [(PRINT_NOTE, FONT_NOTE_MM, "print-note"), (SKIN_NOTE, FONT_NOTE_MM, "skin-note")]
+    if has_marks:
+        notes.append((MARKS_NOTE, FONT_NOTE_MM, "marks-note"))
+    if title:
+        notes.append((title, FONT_TITLE_MM, "pattern-title"))
+    if label:
+        notes.append((label, FONT_TITLE_MM, "pattern-label"))
+    return notes
+
+
+def _draw_pieces(P: Drawing, raw, marks) -> dict:
+    """Every piece's cut and seam-allowance strokes and its label block (kept off the seam
+    numbers) into ``P.pieces``; returns {piece id: its first `DrawnPiece`}."""
+    keep_out: dict[int, list] = {}
+    if marks is not None:
+        for s in marks.seams:
+            for pid, mid, nrm in ((s.piece_a, s.mid_a, s.normal_a), (s.piece_b, s.mid_b, s.normal_b)):
+                keep_out.setdefault(int(pid), []).append(np.asarray(mid) + NUMBER_INSET_MM * np.asarray(nrm))
+    by_id = {}
+    for UV, F, loops, seams, lines, pid in raw:
+        dp = DrawnPiece(lines[0][0], pid,
+                        [Stroke(P.paper(L), True, CUT, "cut", CUT_STROKE_MM) for L in loops],
+                        [Stroke(P.paper(S), True, SEAM_ALLOWANCE, "seam", SEAM_STROKE_MM, True) for S in seams],
+                        _label_block(P, UV, F, loops, lines, keep_out.get(pid, [])), pattern_cut=loops)
+        P.pieces.append(dp)
+        by_id.setdefault(pid, dp)
+    return by_id
+
+
+def _draw_marks(P: Drawing, marks, UVm, by_id: dict) -> None:
+    """Seam ticks with their numbers and dart legs onto their pieces (a mark of a piece not
+    drawn goes onto the page itself)."""
+    for s in marks.seams:
+        for pid, mid, nrm in ((s.piece_a, s.mid_a, s.normal_a), (s.piece_b, s.mid_b, s.normal_b)):
+            tick, num = _seam_marks(P, mid, nrm, s.number)
+            dp = by_id.get(int(pid))
+            (dp.marks if dp else P.strokes).append(tick)
+            (dp.mark_texts if dp else P.texts).append(num)
+    for dm in marks.darts:
+        legs, txt = _dart_marks(P, UVm, dm)
+        dp = by_id.get(int(dm.piece))
+        (dp.marks if dp else P.strokes).extend(legs)
+        (dp.mark_texts if dp else P.texts).append(txt)
+
+
 def pattern_drawing(pieces, marks=None, *, label: str = "", title: str = "", seam_allowance_mm: float = 0.0,
                     margin_mm: float = 10.0, decimals: int = 3) -> Drawing:
     """Lay the pattern out once, in paper mm.
@@ -421,63 +406,26 @@ def pattern_drawing(pieces, marks=None, *, label: str = "", title: str = "", sea
     m = _length(margin_mm, "margin")
     label, title = _one_line(label), _one_line(title)
     raw = [_piece(i, isl, d, label) for i, isl in enumerate(pieces)]
-    allpts = np.concatenate([np.concatenate(r[2] + r[3]) for r in raw])
-    if marks is not None and (marks.seams or marks.darts):
-        UVm = _marks_uv(marks)
-        ids = [s.chain_a for s in marks.seams] + [s.chain_b for s in marks.seams]
-        ids += [np.r_[dm.leg_a, dm.leg_b] for dm in marks.darts]
-        allpts = np.concatenate([allpts, UVm[np.concatenate(ids)]])
-    lo, hi = allpts.min(axis=0), allpts.max(axis=0)
-    if marks is not None and (marks.seams or marks.darts):
-        lo, hi = lo - TICK_MM, hi + TICK_MM  # room for the ticks
+    has_marks = marks is not None and bool(marks.seams or marks.darts)
+    lo, hi, UVm = _content_box(raw, marks, has_marks)
     content_w, content_h = hi - lo
     ox, oy = round(m - lo[0], decimals), round(m + hi[1], decimals)
     y_sq = m + content_h + 8.0
-    notes = [(PRINT_NOTE, FONT_NOTE_MM, "print-note"), (SKIN_NOTE, FONT_NOTE_MM, "skin-note")]
-    if marks is not None and (marks.seams or marks.darts):
-        notes.append((MARKS_NOTE, FONT_NOTE_MM, "marks-note"))
-    if title:
-        notes.append((title, FONT_TITLE_MM, "pattern-title"))
-    if label:
-        notes.append((label, FONT_TITLE_MM, "pattern-label"))
+    notes = _footer_notes(has_marks, title, label)
     x_notes = m + TEST_SQUARE_MM + 8.0
     notes_w = max(_text_w(t, s) for t, s, _ in notes)
     W = max(content_w + 2 * m, x_notes + notes_w + m)
     H = max(y_sq + TEST_SQUARE_MM, y_sq + 7.0 * len(notes)) + m
     P = Drawing(W, H, [], [], [], (m, m, m + content_w, m + content_h), (m, y_sq), {"ox": ox, "oy": oy},
                 title, label, d)
-    keep_out: dict[int, list] = {}
-    if marks is not None:
-        for s in marks.seams:
-            for pid, mid, nrm in ((s.piece_a, s.mid_a, s.normal_a), (s.piece_b, s.mid_b, s.normal_b)):
-                keep_out.setdefault(int(pid), []).append(np.asarray(mid) + NUMBER_INSET_MM * np.asarray(nrm))
-    by_id = {}
-    for UV, F, loops, seams, lines, pid in raw:
-        dp = DrawnPiece(lines[0][0], pid,
-                        [Stroke(P.paper(L), True, CUT, "cut", CUT_STROKE_MM) for L in loops],
-                        [Stroke(P.paper(S), True, SEAM_ALLOWANCE, "seam", SEAM_STROKE_MM, True) for S in seams],
-                        _label_block(P, UV, F, loops, lines, keep_out.get(pid, [])), pattern_cut=loops)
-        P.pieces.append(dp)
-        by_id.setdefault(pid, dp)
-    if marks is not None and (marks.seams or marks.darts):
-        for s in marks.seams:
-            for pid, mid, nrm in ((s.piece_a, s.mid_a, s.normal_a), (s.piece_b, s.mid_b, s.normal_b)):
-                tick, num = _seam_marks(P, mid, nrm, s.number)
-                dp = by_id.get(int(pid))
-                (dp.marks if dp else P.strokes).append(tick)
-                (dp.mark_texts if dp else P.texts).append(num)
-        for dm in marks.darts:
-            legs, txt = _dart_marks(P, UVm, dm)
-            dp = by_id.get(int(dm.piece))
-            (dp.marks if dp else P.strokes).extend(legs)
-            (dp.mark_texts if dp else P.texts).append(txt)
+    by_id = _draw_pieces(P, raw, marks)
+    if has_marks:
+        _draw_marks(P, marks, UVm, by_id)
     # footer: the test square (its bottom side is the scale bar), its label, the notes
-    x0, s = m, TEST_SQUARE_MM
-    sq = np.array([[x0, y_sq], [x0 + s, y_sq], [x0 + s, y_sq + s], [x0, y_sq + s]])
-    P.strokes.append(Stroke(sq, True, MARKS, "square", MARK_STROKE_MM))
-    P.strokes.append(Stroke(sq[[3, 2]], False, MARKS, "bar", MARK_STROKE_MM))
-    P.texts.append(Text(f"{s:g} mm", np.array([x0 + s / 2, y_sq + s / 2 + 0.35 * FONT_METRICS_MM]),
-                        FONT_METRICS_MM, "square-label"))
+    square, square_label = test_square_strokes(m, y_sq)
+    P.strokes.append(square)
+    P.strokes.append(Stroke(square.points[[3, 2]], False, MARKS, "bar", MARK_STROKE_MM))
+    P.texts.append(square_label)
     y = y_sq + 4.0
     for t, size, kind in notes:
         P.texts.append(Text(t, np.array([x_notes, y]), size, kind, "start"))
