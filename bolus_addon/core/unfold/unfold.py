@@ -1,34 +1,23 @@
 """Unfolding a patch into a true-scale flat pattern (seed 3.5, 4.5; eqs. 3-22..3-31, 4-22..4-25).
 
-The pipeline of `unfold_patch` for one disk-like patch, V (n,3) mm, F (m,3); each stage
-lives in its own module:
+`unfold_patch` flattens one disk-like patch, V (n,3) mm, F (m,3), into an `Unfolding` (UV
+(n2,2) mm, counter-clockwise); a patch that is not a topological disk is cut to one first
+(`cut_to_disk`).  Its stages, each in its own module:
 
-1. start (`initial_unfolding`): the least-squares conformal map (``start="auto"``, one
-   sparse solve) or the seed's coordinate transformation of 4.5.1 (``start="greedy"``),
-   which reaches the same minimum where it does not fold, but folded over on 6 of 8
-   scanned nose patches and costs seconds of Python on 20k-triangle patches;
-2. relaxation of the mass-spring model with crossed and disturbing springs (`springs`,
-   3.5, 4.5.2; total energy eqs. 3-28, 3-29, 4-25) by L-BFGS or the seed's explicit
-   integrator (`relax`), with the flip penalty on from the first step (the start has no
-   flipped triangle; a nostril pocket otherwise folds flat);
-3. L1 length refinement (`refine`, our addition): IRLS towards EL (eq. 3-30) itself;
-4. overlap correction (`overlap_correction`, 4.5.3): flipped triangles, then outline
-   crossings locally around them and over the whole patch only if that fails;
+1. start: the least-squares conformal map or the coordinate transformation of 4.5.1 (`initial_unfolding`);
+2. relaxation of the mass-spring model with crossed and disturbing springs (`springs`, 3.5, 4.5.2;
+   energy eqs. 3-28, 3-29, 4-25) by L-BFGS or the explicit integrator (`relax`), flip penalty on;
+3. L1 length refinement (`refine`): IRLS towards EL (eq. 3-30);
+4. overlap correction (`overlap_correction`, `unfold_stages`, 4.5.3): flips, then outline crossings;
 5. the measures EL, EA (`measures`, eqs. 3-30, 3-31) and the flags.
 
-Hopeless patches (EL > `HOPELESS_EL` or EA > `HOPELESS_EA` after relaxation and
-refinement) skip the overlap correction and come back at once with
-``Unfolding.hopeless`` and the figures (angle deficit / excess, eq. 4-1).
+EL > `HOPELESS_EL` or EA > `HOPELESS_EA` after stage 3 skips stage 4: the patch comes back
+``hopeless`` with its angle deficit / excess (eq. 4-1).  With ``target_el`` a patch that cannot
+meet the target, or whose relaxed outline is tangled, comes back hopeless after stage 2, for
+darts and splits (`sheet_pieces`).  `iter_unfold_patches` unfolds a labelled mesh patch by patch,
+`assemble` lays the patches out; the stage modules' names are re-exported here.
 
-Early decision (``unfold_patch(target_el=...)``): after the cut, the
-start and a short trial relaxation, a patch that cannot meet an EL target in one piece
-comes back hopeless before the refinement and the overlap correction, so that darts
-and splits (`sheet_pieces`) take over; with a target, an outline that crosses itself at
-more than `TANGLED_CROSSINGS` points after the relaxation is also handed back (split it)
-instead of corrected.  Rules and calibration in `unfold_patch`.
-
-A patch that is not a topological disk is cut to one first (`cutting.cut_to_disk`).  `assemble` lays the
-patches out.  The names imported from here before the split are re-exported.
+Design notes: docs/design/unfold.md.
 """
 from __future__ import annotations
 
@@ -41,7 +30,7 @@ from .assemble import Pattern, assemble_pattern
 from ..mesh.boundary import cut_to_disk
 from ..errors import BolusError
 from .initial_unfolding import _conformal, _greedy, conformal_unfolding, initial_unfolding
-from .measures import (
+from .measures import (  # noqa: F401 (re-exported)
     _curvature_sums,
     _ratios,
     _triangle_errors,
@@ -50,8 +39,8 @@ from .measures import (
     polygon_area_error,
     polygon_errors,
 )
-from .overlap import boundary_self_intersections, overlapping_faces, signed_areas
-from .overlap_correction import (
+from .overlap import boundary_self_intersections, overlapping_faces, signed_areas  # noqa: F401
+from .overlap_correction import (  # noqa: F401 (re-exported)
     FLIP_ROUNDS,
     FLIP_WEIGHT,
     OUTLINE_ITERS,
@@ -66,7 +55,7 @@ from .overlap_correction import (
 from .refine import refine_lengths_l1
 from .relax import STOP_EVERY, relax_explicit, relax_lbfgs
 from ..analysis.saliency import lumped_mass
-from .springs import (
+from .springs import (  # noqa: F401 (re-exported)
     CONTOUR_WINDOW,
     Springs,
     _build_springs,
@@ -76,6 +65,18 @@ from .springs import (
     stiffness_laplacian,
 )
 from ..mesh.topology import MeshTopology, check_mesh, misoriented_text, submesh
+from .unfold_stages import (  # noqa: F401 (re-exported)
+    HOPELESS_FLIP_WEIGHT,
+    LOCAL_FIRST,
+    OUTLINE_BIG,
+    PROGRESS,
+    _ccw,
+    _flip_stage,
+    _outline_stage,
+    _refine_stage,
+    _Run,
+    _Stages,
+)
 
 __all__ = [
     "Springs",
@@ -103,11 +104,10 @@ __all__ = [
 METHODS = ("lbfgs", "explicit")
 STARTS = ("auto", "conformal", "greedy")
 MIN_TRIANGLES = 3  # fewer triangles are no patch to unfold
-RELAX_ITERS = 300  # L-BFGS iterations of the relaxation (was 2000)
-RELAX_TOL = 1e-7  # its stop test: relative energy decrease over 5 iterations (was 1e-9)
+RELAX_ITERS = 300  # L-BFGS iterations of the relaxation
+RELAX_TOL = 1e-7  # its stop test: relative energy decrease over 5 iterations
 EXPLICIT_ITERS = 20000  # steps of the explicit integrator unless max_iter says otherwise
 RELAX_FLIP_WEIGHT = 10.0 * FLIP_WEIGHT  # flip penalty during the relaxation from a flip-free start
-HOPELESS_FLIP_WEIGHT = 100.0 * FLIP_WEIGHT  # the one short flip round of a hopeless patch
 HOPELESS_EL = 0.10  # a pattern this far off after relaxation cannot be rescued by the overlap correction
 HOPELESS_EA = 0.20
 HOPELESS_FAR = 2.0  # EL above HOPELESS_FAR * HOPELESS_EL after 50 iterations: stop relaxing, it is hopeless
@@ -116,11 +116,6 @@ TANGLED_CROSSINGS = 9  # with target_el: outline crossings after the relaxation 
 TANGLED_OVERLAP = 0.10  # with target_el: or this share of the triangles overlapping after the relaxation
 QUICK_ITERS = STOP_EVERY  # the cheap trial of the early decision: relaxation iterations before it (``target_el``)
 QUICK_GAIN = 0.55  # the full pipeline's EL is at least this x the trial's EL (0.55 or more on 204 patches)
-OUTLINE_BIG = 10000  # triangles: larger patches get proportionally fewer outline rounds
-LOCAL_FIRST = True  # try `local_outline` before the whole-patch `correct_outline`
-# progress fraction range of every stage (by their typical share of the time)
-PROGRESS = {"start": (0.0, 0.1), "relax": (0.1, 0.35), "flips": (0.35, 0.45), "refine": (0.45, 0.6),
-            "local": (0.6, 0.7), "outline": (0.6, 0.95), "outline refine": (None, 0.98)}
 
 
 @dataclass
@@ -163,46 +158,6 @@ class Unfolding:
     trial_EL: float = float("nan")
 
 
-class _Stages:
-    """Progress of `unfold_patch`: stage ranges of the fraction, never decreasing, and a
-    call at least every ~0.5 s inside the long loops (relax_lbfgs reports itself)."""
-
-    def __init__(self, progress):
-        self.progress = progress
-        self.last = 0.0
-        self.lo, self.hi, self.text = 0.0, 0.0, ""
-
-    def stage(self, lo: float, hi: float, text: str) -> None:
-        self.lo, self.hi, self.text = lo, hi, text
-        self(0.0)
-
-    def __call__(self, f: float, text: str | None = None) -> None:
-        if self.progress is None:
-            return
-        frac = max(self.last, min(self.hi, self.lo + (self.hi - self.lo) * min(max(float(f), 0.0), 1.0)))
-        self.last = frac
-        self.progress(frac, text or self.text)
-
-
-@dataclass
-class _Run:
-    """State of one `unfold_patch` call: the cut patch, its springs, progress, counters."""
-
-    topo: MeshTopology
-    springs: Springs
-    st: _Stages
-    it: int = 0
-    trial_el: float = float("nan")
-    trial_it: int = 0
-    warnings: list[str] = field(default_factory=list)
-
-    def flipped(self, UV) -> int:
-        return int(np.count_nonzero(signed_areas(UV, self.topo.F) <= 0))
-
-    def errors(self, UV) -> tuple[float, float]:
-        return _ratios(*_triangle_errors(self.topo.V, self.topo.F, UV))
-
-
 def _check_patch(V, F, method: str, start: str) -> tuple[np.ndarray, np.ndarray, MeshTopology]:
     """The input checks of `unfold_patch` (messages in the caller's indices); returns (V, F, topology)."""
     V, F = check_mesh(V, F, "the patch", nondegenerate=False, min_faces=0)
@@ -225,13 +180,6 @@ def _check_patch(V, F, method: str, start: str) -> tuple[np.ndarray, np.ndarray,
             "recalculate the normals first (Mesh > Normals > Recalculate Outside)"
         )
     return V, F, topo
-
-
-def _ccw(UV, F) -> np.ndarray:
-    """Mirror UV (n,2) in place if its total signed area is negative (counter-clockwise like the 3D corners)."""
-    if np.sum(signed_areas(UV, F)) < 0:
-        UV[:, 0] = -UV[:, 0]
-    return UV
 
 
 def _start(run: _Run, start: str) -> np.ndarray:
@@ -304,30 +252,6 @@ def _early_reason(run: _Run, target_el: float, deficit: float, excess: float) ->
             "cut darts or split the patch (the later stages were skipped)")
 
 
-def _flip_stage(run: _Run, UV, far: bool) -> tuple[np.ndarray, int]:
-    """Flipped triangles corrected (4.5.3); a hopeless patch gets one short strong round."""
-    if far:  # only to take out the folds
-        UV, it, flipped = correct_flips(UV, run.springs, run.topo, rounds=1, max_iter=OUTLINE_ITERS, progress=run.st,
-                                        weight=HOPELESS_FLIP_WEIGHT)
-    else:
-        UV, it, flipped = correct_flips(UV, run.springs, run.topo, progress=run.st)
-    run.it += it
-    return UV, flipped
-
-
-def _refine_stage(run: _Run, UV, flipped: int, rounds: int, far: bool) -> tuple[np.ndarray, int]:
-    """L1 length refinement (flip penalty on if nothing is flipped), then flips corrected again."""
-    topo = run.topo
-    UV, it = refine_lengths_l1(UV, run.springs, topo.edge_face_count.astype(np.float64), rounds=rounds,
-                               F=topo.F if flipped == 0 else None, A0=topo.areas, progress=run.st)
-    run.it += it
-    flipped = run.flipped(UV)
-    if flipped:
-        UV, it, flipped = correct_flips(UV, run.springs, topo, rounds=1 if far else FLIP_ROUNDS)
-        run.it += it
-    return UV, flipped
-
-
 def _tangled(crossings: int, overlap_share: float) -> str:
     """'' or what makes a relaxed pattern tangled (`TANGLED_CROSSINGS`, `TANGLED_OVERLAP`)."""
     if crossings > TANGLED_CROSSINGS:
@@ -352,144 +276,19 @@ def _hopeless(EL: float, EA: float, deficit: float, excess: float, tangled: str 
                   "the patch cannot lie flat in one piece, the overlap correction was skipped")
 
 
-def _whole_outline(run: _Run, UV, flipped: int, refine_rounds: int) -> tuple[np.ndarray, int]:
-    """Whole-patch outline correction, refined again with the outline kept apart; kept if not worse."""
-    topo, st = run.topo, run.st
-    st.stage(*PROGRESS["outline"], "overlap correction")
-    # big patches: fewer rounds (each costs ~m), at least 2 (OUTLINE_BIG triangles: all rounds)
-    rounds = max(2, min(OUTLINE_ROUNDS, OUTLINE_ROUNDS * OUTLINE_BIG // topo.m))
-    UV2, it, _, term = correct_outline(UV, run.springs, topo, rounds=rounds, progress=st)
-    run.it += it
-    if refine_rounds > 0 and term is not None:
-        # the correction relaxed the plain spring energy: refine again, outline kept apart
-        st.stage(st.last, PROGRESS["outline refine"][1], "length refinement (outline kept apart)")
-        UV3, it = refine_lengths_l1(UV2, run.springs, topo.edge_face_count.astype(np.float64),
-                                    rounds=refine_rounds, F=topo.F, A0=topo.areas, extra=term, progress=st)
-        run.it += it
-        if defects(UV3, topo.F) <= defects(UV2, topo.F):
-            UV2 = UV3
-    if defects(UV2, topo.F) <= defects(UV, topo.F):
-        return UV2, run.flipped(UV2)
-    return UV, flipped
-
-
-def _outline_stage(run: _Run, UV, flipped: int, refine_rounds: int) -> tuple[np.ndarray, int]:
-    """Outline crossings (4.5.3): locally first, the whole patch if that fails, locally again;
-    the last flips left are untangled locally."""
-    topo = run.topo
-    if LOCAL_FIRST and len(boundary_self_intersections(UV, topo.F)):
-        run.st.stage(*PROGRESS["local"], "overlap correction (local)")
-        UV2, it, crossings2 = local_outline(UV, run.springs, topo)
-        run.it += it
-        if crossings2 == 0 and not run.flipped(UV2):
-            UV, flipped = UV2, 0
-    if len(boundary_self_intersections(UV, topo.F)):
-        UV, flipped = _whole_outline(run, UV, flipped, refine_rounds)
-    if len(boundary_self_intersections(UV, topo.F)):
-        # crossings left: a local correction around them only (the rest of the pattern stays)
-        UV, it, _ = local_outline(UV, run.springs, topo)
-        run.it += it
-        flipped = run.flipped(UV)
-    return UV, flipped
-
-
-def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: int | None = None,
-                 progress=None, start: str = "auto", *, relax: bool = True, crossed_springs: bool = True,
-                 disturbing_springs: bool = True, target_el: float | None = None) -> Unfolding:
-    """Unfold one patch into the plane at true scale (seed 4.5; see the module docstring).
-
-    Parameters
-    ----------
-    V : (n,3) float, mm; F : (m,3) int, consistently oriented triangles (at least 3).
-    method : "lbfgs" (default) or "explicit" (the seed's integrator, eqs. 3-23..3-27).
-    refine_rounds : rounds of `refine_lengths_l1` (0 = the spring energy's minimum as it is).
-    max_iter : iteration budget of the relaxation (default `RELAX_ITERS` / `EXPLICIT_ITERS`).
-    progress : progress(fraction in [0, 1], text), called at every stage ("initial
-        unfolding", "relaxing springs", "length refinement", "overlap correction round
-        k/n") and about every 0.5 s inside them.
-    start : "auto" (= "conformal") starts from `conformal_unfolding`, "greedy" from the
-        coordinate transformation of 4.5.1 (`initial_unfolding`; if that folds over, the
-        conformal map is used and a warning says so).
-    relax, crossed_springs, disturbing_springs : stage switches (for the ablation of
-        bench/unfold_bench.py; defaults = the full method).  relax=False: no spring
-        relaxation and no length refinement (``refine_rounds`` is ignored): the start as
-        it is (for "greedy" with its own relaxation of the part unfolded so far, 4.5.3),
-        mirrored to counter-clockwise; only if it has flipped triangles or outline
-        crossings does the overlap correction (4.5.3) run on it, as in the full pipeline
-        (flip rounds, local then whole-patch outline correction, `untangle`); a flip-free
-        start without crossings comes back unchanged.  crossed_springs=False /
-        disturbing_springs=False: the model is built without the crossed springs (3.5) /
-        the disturbing contour springs (eq. 4-25) (`build_springs`), in every stage.
-    target_el : None (default: the full pipeline) or an EL target as a fraction (0.02 =
-        2 %): the early decision.  After the cheap stages (cut, conformal start, springs,
-        `QUICK_ITERS` L-BFGS iterations of the relaxation, or the whole relaxation if it
-        ends sooner) the trial's EL is measured (``Unfolding.trial_EL``); if
-        `QUICK_GAIN` x trial EL > target_el the patch cannot meet the target in one piece
-        and comes back at once with ``hopeless=True``, ``hopeless_reason`` naming the
-        trial EL, the target and the angle deficit / excess (eq. 4-1), and the trial
-        pattern with its figures (EL, EA, flips, overlaps); refinement (darts, splits)
-        should take over.  Otherwise the call goes on exactly as without target_el (the
-        same pattern; EL may still end above the target).  Calibration of QUICK_GAIN
-        (full-pipeline EL / trial EL) on 204 patches: caps, saddle, the bench's nose,
-        chest, knee and nostril patches, the hard patches, and nose regions of
-        nefertiti, demosthenes (145 mm/unit), ICT and MakeHuman of 30-50 mm, native and
-        subdivided, cut into 2-4 patches (21-17,000 triangles).  On the 170 the full
-        pipeline does not flag hopeless (EL >= 0.1 %) the ratio is 0.55-0.95 (below 0.6
-        only on coarse demosthenes pieces of 21-234 triangles; above 1 on two pieces whose
-        overlap correction raised EL, 1.1 and 1.8), on the 32 it flags 0.75-1.56.  With 0.55 no patch was flagged that the full pipeline brought under
-        the target, for any target from 0.1 to 10 %; at 2 % it flagged 87, all above 2 %
-        in the end, and let 30 more that end above 2 % through (they get the full call).
-        (0.6 flagged 5 small pieces wrongly.)  The angle sums alone do not
-        decide: the full EL per radian of (diffused) deficit + excess spans 0.2-2.6 %/rad
-        over the same patches (a long strip carries much total curvature at little
-        stretch), so they are reported, not used.  Cost: the cut, start and 25 iterations
-        (~1/4-1/2 of a full call on small patches, 1/10-1/5 on large ones; measured on the
-        hard patches 0.03-0.18 s CPU up to 2.2k triangles, 0.4-0.9 s at 4.7-6.4k,
-        1.1-1.5 s at 11-12k, against 0.07-0.4, 1.1-5.6 and 5-14 s for the full call).
-        method="explicit" has no stop test: its whole relaxation is the trial there.
-        With a target, an outline that crosses itself at more than `TANGLED_CROSSINGS`
-        points after the relaxation, or a pattern with more than `TANGLED_OVERLAP` of its
-        triangles overlapping others then, is handed back hopeless too (one short flip
-        round, the refinement, no outline correction), for the caller to split.
-        Crossings: of 10 patches with 10-47, the correction laid one flat (an ICT nose
-        piece of 1607 triangles, 28 crossings, 0.7 s) and left 9 overlapping: two ICT
-        nostril pieces of 10-12k triangles (133 and 442 triangles after 17-30 s; 3-7 s
-        without it), four ruffled disks z = a r^2 sin(k phi) (~1000 of 1152 after
-        2.4-3.3 s; 0.4 s without), three ICT / MakeHuman nose pieces of 700-3000
-        triangles (4-10 after 1.3-1.7 s; 4-40 without it, at a lower EL); every bench
-        patch it lays flat has 0-8.  Overlap share: at most 3.6 % on the 11 patches with
-        flips or crossings after the relaxation that the correction laid flat (bench,
-        hard and sweep patches); 15.5 % on a MakeHuman nose piece of 3964 triangles
-        with one crossing, which it left with 760 overlapping after 11-14 s (patches
-        hopeless by EL: 18-24 %).  Neither predicts failure for certain, so the default
-        (no target) keeps the correction.
-
-    Returns
-    -------
-    `Unfolding`: UV (n2,2) counter-clockwise; flipped triangles are corrected (4.5.3) and
-    any that remain, and any overlap of the outline, are counted and reported.  Vertices
-    in no triangle are left out (vert_origin names the input vertex of every UV row).
-
-    Raises `BolusError` naming the problem and where for bad arrays, NaN/inf, fewer than
-    3 triangles, zero-area triangles (coincident or collinear vertices), non-manifold
-    edges, inconsistent winding, an unknown method or start, a target_el that is not a
-    finite number > 0.  Needle triangles (tiny
-    angles, positive area) are unfolded like any other.
-
-    Budgets (the stages of the seed are kept, their budgets are ours): the
-    relaxation stops at `RELAX_ITERS` iterations or a relative energy decrease below
-    `RELAX_TOL` over 5 iterations; a relaxation whose EL is still above `HOPELESS_FAR` x
-    `HOPELESS_EL` after 50 iterations is stopped (a nostril pocket) and gets one short
-    flip round; after the refinement, a pattern with EL > `HOPELESS_EL` or EA >
-    `HOPELESS_EA` cannot be rescued by the overlap correction (it only moves the
-    outline), so that is skipped and the pattern returned with ``hopeless`` and
-    ``hopeless_reason``.
-    """
-    t0 = time.perf_counter()
-    st = _Stages(progress)
+def _check_target(target_el) -> None:
+    """``target_el`` is None or a finite EL fraction above 0, else `BolusError`."""
     if target_el is not None and not (isinstance(target_el, (int, float, np.number)) and np.isfinite(target_el)
                                       and target_el > 0):
         raise BolusError(f"target_el must be None or an EL fraction above 0 (0.02 = 2 %), got {target_el!r}")
+
+
+def _cut_patch(V, F, method: str, start: str, st: _Stages, crossed_springs: bool, disturbing_springs: bool):
+    """The checked patch cut to a disk (`cut_to_disk`) with its mass-spring model (3.5, eq. 4-25).
+
+    Returns (run, cut, used, deficit, excess): `_Run` on the cut patch; used (k,) the input
+    vertices in a triangle (``cut.vert_origin`` indexes them); deficit / excess the angle sums
+    of eq. 4-1 (rad) of the patch as given."""
     V, F, topo0 = _check_patch(V, F, method, start)
     st.stage(*PROGRESS["start"], "initial unfolding")
     deficit, excess = _curvature_sums(topo0)
@@ -498,37 +297,115 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     topo = MeshTopology(cut.V, cut.F)
     # (the patch is checked: _check_patch; the cut keeps its triangles)
     springs = _build_springs(topo, CONTOUR_WINDOW if disturbing_springs else 0, crossed_springs)
-    run = _Run(topo, springs, st)
-    UV = _start(run, start)
-    st.stage(*PROGRESS["relax"], "relaxing springs")
+    return _Run(topo, springs, st), cut, used, deficit, excess
+
+
+def _relax_and_judge(run: _Run, UV, relax: bool, method: str, max_iter: int | None,
+                     target_el: float | None) -> tuple[np.ndarray, bool, bool, str]:
+    """Stage 2, the relaxation, with the early decision: (UV (n,2) mm, far, early, tangled).
+
+    far: stopped as hopeless (`_relax_stage`); early: the trial misses ``target_el``
+    (`_early_miss`; without relaxation the start is the trial); tangled: with a target,
+    `_tangled`'s finding on the relaxed pattern ('' if none)."""
     far = early = False
     tangled = ""
     if relax:
         UV, far, early = _relax_stage(run, UV, method, max_iter, target_el)
         if target_el is not None and not (far or early):  # the tangled rule (with a target only)
-            crossings = len(boundary_self_intersections(UV, topo.F))
+            crossings = len(boundary_self_intersections(UV, run.topo.F))
             # no flip and no crossing: an embedding, nothing overlaps (no need to count)
-            share = overlapping_faces(UV, topo.F).mean() if crossings or run.flipped(UV) else 0.0
+            share = overlapping_faces(UV, run.topo.F).mean() if crossings or run.flipped(UV) else 0.0
             tangled = _tangled(crossings, float(share))
     elif target_el is not None:  # no relaxation: the start is the trial
         run.trial_el = run.errors(UV)[0]
         early = _early_miss(run.trial_el, target_el)
-    if early:
-        reason = _early_reason(run, float(target_el), deficit, excess)
-        return _finish(run, UV, run.flipped(UV), cut, used, method, t0, True, deficit, excess, reason)
-    st.stage(*PROGRESS["flips"], "correcting flipped triangles")
+    return UV, far, early, tangled
+
+
+def _correct(run: _Run, UV, far: bool, tangled: str, relax: bool, refine_rounds: int, deficit: float,
+             excess: float) -> tuple[np.ndarray, int, bool, str]:
+    """Stages 3-4: flips, the L1 refinement, then the outline unless hopeless (4.5.3), and the last
+    folds untangled locally; returns (UV (n,2) mm, flipped, hopeless, hopeless_reason)."""
+    run.st.stage(*PROGRESS["flips"], "correcting flipped triangles")
     # tangled (with a target): the pattern folds over itself (many crossings or much overlap):
     # like far, one short flip round, no outline correction; the caller splits it (unfold_patch doc)
     short = far or bool(tangled)
     UV, flipped = _flip_stage(run, UV, short)
     if relax and refine_rounds > 0 and not (short and flipped):
-        st.stage(*PROGRESS["refine"], "length refinement")
+        run.st.stage(*PROGRESS["refine"], "length refinement")
         UV, flipped = _refine_stage(run, UV, flipped, refine_rounds, short)
     hopeless, reason = _hopeless(*run.errors(UV), deficit, excess, tangled)
     if not hopeless:
         UV, flipped = _outline_stage(run, UV, flipped, refine_rounds if relax else 0)
     if flipped:  # last resort, no relaxation after it: smooth the few folds left away locally
-        UV, flipped = untangle(UV, topo)
+        UV, flipped = untangle(UV, run.topo)
+    return UV, flipped, hopeless, reason
+
+
+def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: int | None = None,
+                 progress=None, start: str = "auto", *, relax: bool = True, crossed_springs: bool = True,
+                 disturbing_springs: bool = True, target_el: float | None = None) -> Unfolding:
+    """Unfold one patch into the plane at true scale (seed 4.5; the stages in the module docstring).
+
+    Parameters
+    ----------
+    V : (n,3) float, mm; F : (m,3) int, consistently oriented triangles (at least 3).
+    method : "lbfgs" (default) or "explicit" (the seed's integrator, eqs. 3-23..3-27).
+    refine_rounds : rounds of `refine_lengths_l1` (0 = the spring energy's minimum as it is).
+    max_iter : iteration budget of the relaxation (default `RELAX_ITERS` / `EXPLICIT_ITERS`).
+    progress : progress(fraction in [0, 1], text), called at every stage ("initial unfolding",
+        "relaxing springs", "length refinement", "overlap correction round k/n") and about
+        every 0.5 s inside them.
+    start : "auto" (= "conformal") starts from `conformal_unfolding`, "greedy" from the
+        coordinate transformation of 4.5.1 (`initial_unfolding`; if that folds over, the
+        conformal map is used and a warning says so).
+    relax, crossed_springs, disturbing_springs : stage switches (for the ablation of
+        bench/unfold_bench.py; defaults = the full method).  relax=False: no relaxation and no
+        length refinement (``refine_rounds`` is ignored): the start as it is (for "greedy" with
+        its own relaxation of the part unfolded so far, 4.5.3), mirrored to counter-clockwise;
+        only if it has flipped triangles or outline crossings does the overlap correction
+        (4.5.3) run on it, as in the full pipeline; a flip-free start without crossings comes
+        back unchanged.  crossed_springs / disturbing_springs=False: the model is built without
+        the crossed springs (3.5) / the disturbing contour springs (eq. 4-25), in every stage.
+    target_el : None (default: the full pipeline) or an EL target as a fraction (0.02 = 2 %):
+        the early decision.  After the cut, the start, the springs and `QUICK_ITERS` L-BFGS
+        iterations of the relaxation (the whole relaxation if it ends sooner, and always for
+        method="explicit", which has no stop test) the trial's EL is measured
+        (``Unfolding.trial_EL``); if `QUICK_GAIN` x trial EL > target_el the patch comes back
+        at once with ``hopeless=True``, ``hopeless_reason`` naming the trial EL, the target and
+        the angle deficit / excess (eq. 4-1), and the trial pattern with its figures, for darts
+        and splits to take over.  A relaxed outline crossing itself at more than
+        `TANGLED_CROSSINGS` points, or more than `TANGLED_OVERLAP` of the triangles overlapping
+        others, is handed back hopeless too (one short flip round, the refinement, no outline
+        correction).  Otherwise the call goes on exactly as without target_el (EL may still end
+        above the target).  Calibration and costs: docs/design/unfold.md.
+
+    Returns `Unfolding`: UV (n2,2) counter-clockwise; flipped triangles are corrected (4.5.3)
+    and any that remain, and any overlap of the outline, are counted and reported.  Vertices
+    in no triangle are left out (vert_origin names the input vertex of every UV row).
+
+    Raises `BolusError` naming the problem and where for bad arrays, NaN/inf, fewer than 3
+    triangles, zero-area triangles (coincident or collinear vertices), non-manifold edges,
+    inconsistent winding, an unknown method or start, a target_el that is not a finite
+    number > 0.  Needle triangles (tiny angles, positive area) are unfolded like any other.
+
+    Budgets: the relaxation stops at `RELAX_ITERS` iterations or a relative energy decrease
+    below `RELAX_TOL` over 5 iterations, or when its EL is still above `HOPELESS_FAR` x
+    `HOPELESS_EL` after 50 iterations (one short flip round follows); after the refinement a
+    pattern with EL > `HOPELESS_EL` or EA > `HOPELESS_EA` skips the overlap correction (it
+    only moves the outline) and comes back with ``hopeless`` and ``hopeless_reason``.
+    """
+    t0 = time.perf_counter()
+    st = _Stages(progress)
+    _check_target(target_el)
+    run, cut, used, deficit, excess = _cut_patch(V, F, method, start, st, crossed_springs, disturbing_springs)
+    UV = _start(run, start)
+    st.stage(*PROGRESS["relax"], "relaxing springs")
+    UV, far, early, tangled = _relax_and_judge(run, UV, relax, method, max_iter, target_el)
+    if early:
+        reason = _early_reason(run, float(target_el), deficit, excess)
+        return _finish(run, UV, run.flipped(UV), cut, used, method, t0, True, deficit, excess, reason)
+    UV, flipped, hopeless, reason = _correct(run, UV, far, tangled, relax, refine_rounds, deficit, excess)
     return _finish(run, UV, flipped, cut, used, method, t0, hopeless, deficit, excess, reason)
 
 
