@@ -7,7 +7,7 @@
 # make extension - the installable extension zip in dist/ (Blender's own builder, from bpy)
 # make house - packages, modules, import cycles, the longest modules and functions (scripts/house.py)
 # make operators-doc - docs/operators.md from the registered operators (scripts/operators_doc.py)
-# make extension-wheels - one zip per platform in dist/, with scipy, scikit-learn and manifold3d (cp311 and cp313) inside
+# make extension-wheels - one zip per platform in dist/, with scipy, scikit-learn, manifold3d and libigl (cp311 and cp313) inside
 #
 # One venv per Blender, each from its pinned requirements file and stamped .installed:
 #   .venv/   bpy 5.0.1, Python 3.11, numpy 1.26  requirements.txt       whole suite

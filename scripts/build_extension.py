@@ -1,13 +1,14 @@
-"""Build installable extension zips that carry scipy, scikit-learn, manifold3d, ezdxf and fpdf2 (`make extension-wheels`).
+"""Build installable extension zips that carry scipy, scikit-learn, manifold3d, libigl, ezdxf and fpdf2 (`make extension-wheels`).
 
-Blender ships numpy but not scipy, scikit-learn or manifold3d (the volume and boolean library of the
-printed bolus), nor ezdxf and fpdf2 (the DXF and PDF pattern export), which the add-on's core needs.
+Blender ships numpy but not scipy, scikit-learn, manifold3d (the volume and boolean library of the
+printed bolus) or libigl (its compiled marching cubes), nor ezdxf and fpdf2 (the DXF and PDF
+pattern export), which the add-on's core needs.  libigl's cp313 wheel is a cp312-abi3 one.
 Blender extensions can bundle Python wheels (manifest ``wheels = [...]``), one zip per
 platform.  Blender 4.2-5.0 run Python 3.11 and Blender 5.1+ Python 3.13, so every zip
 carries the wheels for both (cp311 and cp313); Blender installs the ones for its Python.
 This script
 
-1. downloads, with the venv's pip, the scipy, scikit-learn and manifold3d wheels of every platform
+1. downloads, with the venv's pip, the scipy, scikit-learn, manifold3d and libigl wheels of every platform
    asked (linux-x64, macos-arm64, macos-x64, windows-x64) for both Pythons -- cp311 at the
    versions pinned in requirements.txt, cp313 at those in requirements-bpy52.txt -- and
    the pure-Python packages they need (joblib, cloudpickle, threadpoolctl, narwhals, at
@@ -55,7 +56,7 @@ PYTHONS = {
     "cp311": ("3.11", "requirements.txt", "4.2-5.0"),
     "cp313": ("3.13", "requirements-bpy52.txt", "5.1+"),
 }
-BINARY = ("scipy", "scikit-learn", "manifold3d")
+BINARY = ("scipy", "scikit-learn", "manifold3d", "libigl")
 PURE = ("joblib", "cloudpickle", "threadpoolctl", "narwhals")
 #: the pattern export's libraries: DXF with ezdxf, PDF with fpdf2, and what they need, as
 #: py3-none-any wheels at the versions pinned in requirements.txt (ezdxf and fonttools also publish
@@ -136,12 +137,16 @@ def shipped_files() -> list[str]:
 
 
 def zip_wheel_tags(path: Path) -> dict[str, set[str]]:
-    """{package: {python tags}} of the wheels inside an extension zip."""
+    """{package: {the Python tags it runs on, of PYTHONS}} of the wheels inside an extension zip:
+    a cp3xx wheel runs on that Python, a cp3xx-abi3 wheel on that one and every later one."""
     out: dict[str, set[str]] = {}
     for name in zipfile.ZipFile(path).namelist():
         if name.startswith("wheels/") and name.endswith(".whl"):
             parts = Path(name).name[:-4].split("-")
-            out.setdefault(parts[0].lower().replace("_", "-"), set()).add(parts[-3])
+            py, abi = parts[-3], parts[-2]
+            runs = {t for t in PYTHONS if t == py or (abi == "abi3" and py.startswith("cp")
+                                                          and int(py[2:]) <= int(t[2:]))}
+            out.setdefault(parts[0].lower().replace("_", "-"), set()).update(runs or {py})
     return out
 
 
@@ -216,15 +221,20 @@ drawing = importlib.import_module("bl_ext.user_default.bolus.bolus_addon.core.pa
 tri = [{"UV": np.array([[0.0, 0], [40, 0], [0, 30]]), "F": [[0, 1, 2]], "label": "check"}]
 out["export"] = {ext: drawing.write_pattern(os.path.join(USER, "check." + ext), tri, page="A4")["pages"]
                  for ext in ("svg", "dxf", "pdf")}
+marching = importlib.import_module("bl_ext.user_default.bolus.bolus_addon.core.solid.marching")
+ax = np.arange(-6.0, 6.5, 0.5)
+X, Y, Z = np.meshgrid(ax, ax, ax, indexing="ij")
+ball = marching.marching_manifold(4.0 - np.sqrt(X ** 2 + Y ** 2 + Z ** 2), [-6.0] * 3, [0.5] * 3)
+out["marched_ball"] = [ball.genus(), round(ball.volume() / (4 / 3 * np.pi * 64), 3)]
 out["modules"] = {m: getattr(sys.modules.get(m), "__file__", None)
-                  for m in ("scipy", "sklearn", "manifold3d", "ezdxf", "fpdf")}
+                  for m in ("scipy", "sklearn", "manifold3d", "igl", "ezdxf", "fpdf")}
 print("RESULT " + json.dumps(out))
 """
 
 
 
 #: what the extension's wheels bring; hidden from the Blender under test by `--check`
-BUNDLED_MODULES = ("scipy", "sklearn", "scikit_learn", "manifold3d", "joblib", "threadpoolctl", "narwhals", "cloudpickle",
+BUNDLED_MODULES = ("scipy", "sklearn", "scikit_learn", "manifold3d", "igl", "libigl", "joblib", "threadpoolctl", "narwhals", "cloudpickle",
                    "ezdxf", "fpdf", "fonttools", "defusedxml", "pyparsing", "typing_extensions")
 
 
@@ -273,6 +283,9 @@ def installed_run_problems(res: dict, user: Path) -> list[str]:
         bad.append(f"print_segment(method='LEARNED') (the shipped auto-encoder): {res.get('learned')}")
     if res.get("export") != {"svg": 1, "dxf": 1, "pdf": 1}:
         bad.append(f"pattern export (SVG, DXF, PDF): {res.get('export')}")
+    genus, vol = (res.get("marched_ball") or [None, 0.0])
+    if genus != 0 or not 0.97 < vol <= 1.0:
+        bad.append(f"marching cubes (libigl) on a ball: genus {genus}, volume {vol} of the ball's")
     if res["unfold"] != ["FINISHED"] or not res["pattern"]:
         bad.append(f"unfold: {res['unfold']}, pattern object {res['pattern']}")
     elif not (res["pattern_max_abs_z"] <= 1e-6 and res["pattern_faces_cover_source"] and res["EL"] < 0.02):
@@ -301,7 +314,7 @@ def check_zip(zip_path: Path, pythons: list[str]) -> int:
             else:
                 print(f"  ok {zip_path.name} in bpy {res['bpy']} (Python {res['python']}, numpy {res['numpy']}): "
                       f"segment and unfold finished, EL {res['EL']:.4f}, SVG/DXF/PDF written, scipy, scikit-learn, "
-                      "manifold3d, ezdxf and fpdf2 from the zip's wheels")
+                      "manifold3d, libigl, ezdxf and fpdf2 from the zip's wheels")
             failed += bool(bad)
     return int(failed > 0)
 
@@ -337,9 +350,12 @@ def main() -> int:
     for rel in shipped_files():
         (stage / rel).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(ROOT / rel, stage / rel)
-    wanted = {f"{n.replace('-', '_')}-{pins[n][tag]}-{tag}" for n in BINARY for tag in PYTHONS}
-    found = sorted({w for d in folders for w in d.glob("*.whl")
-                    if d.name == "any" or "-".join(w.name.split("-")[:3]) in wanted}, key=lambda w: w.name)
+    found = set(folders[-1].glob("*.whl"))  # the pure ones
+    for plat in args.platforms:
+        for tag in PYTHONS:  # each Python's folder: its pinned binaries (cp3xx or an older abi3 wheel)
+            wanted = {f"{n.replace('-', '_')}-{pins[n][tag]}" for n in BINARY}
+            found |= {w for w in (cache / plat / tag).glob("*.whl") if "-".join(w.name.split("-")[:2]) in wanted}
+    found = sorted(found, key=lambda w: w.name)
     wheels = [w.name for w in found]
     for w in found:
         shutil.copy2(w, stage / "wheels" / w.name)

@@ -102,7 +102,9 @@ def assert_bolus_solid(bpy, bolus, R, t, res, density=1.04):
     assert ok, f"{bad} edges are open, non-manifold or inconsistently wound"
     vol = signed_volume(V, T)
     assert vol > 0, "the solid is wound inward"
-    assert vol == pytest.approx(analytic_volume(R, t), rel=0.01)
+    # 0.5 % for the faceted hemisphere, and the mesher's chamfers along the rim's two creases
+    # (rim wall with inner and outer face), each at most half a voxel square: 2 pi R res^2
+    assert abs(vol - analytic_volume(R, t)) <= 0.005 * analytic_volume(R, t) + 2 * math.pi * R * res ** 2
     np.testing.assert_array_equal(np.array(bolus.matrix_world), np.eye(4))
     side = face_attr(me, "bolus_shell_side")[tp]
     assert set(np.unique(side)) <= {0, 1, 2} and {0, 1, 2} <= set(np.unique(side)), np.unique(side)
@@ -228,13 +230,15 @@ def test_edit_mode_region(bpy_addon, scene):
     side = face_attr(bolus.data, "bolus_shell_side")[tpb]
     inner = Vb[np.unique(Tb[side == 0])]
     # the inner face covers the selected polar cap only (its lowest ring at about 50 degrees); the
-    # selection's border zigzags along whole triangles, so make_shell leaves its teeth out (warned)
+    # selection's border zigzags along whole triangles: the inner face reaches down to the teeth's
+    # tips, or, where make_shell left the teeth out (warned), to the border without them
     from bolus_addon.core.solid.shell import drop_border_ears
 
     region_T, teeth = drop_border_ears(T[sel[tp]])
     assert teeth > 0
     rim_z = V[np.unique(region_T)][:, 2].min()
-    assert inner[:, 2].min() == pytest.approx(rim_z, abs=RES_CAP)
+    tips_z = V[np.unique(T[sel[tp]])][:, 2].min()
+    assert tips_z - RES_CAP <= inner[:, 2].min() <= rim_z + RES_CAP
     inner = inner[inner[:, 2] > rim_z + 3 * RES_CAP]  # away from the rim (its corner is rounded by a voxel)
     assert np.abs(np.linalg.norm(inner, axis=1) - R_CAP).max() <= RES_CAP / 2 + 0.02
     skin = bpy.data.meshes[bolus["bolus_skin_mesh"]]
@@ -386,9 +390,9 @@ def test_thin_spot_warned_once(bpy_addon):
 
 def test_region_with_a_hole_keeps_it_open(bpy_addon, scene, capfd):
     """A dome with its top cut away along whole triangles (a breathing hole with a saw-tooth
-    border): the bolus is one closed solid of genus 1 (Euler: V - E + F = 0), a warning that the
-    48 teeth were left out (no warning of extra tunnels), and the report counts the hole (the teeth left tiny tunnels at the rim, genus 13 at
-    1 mm, until make_shell retried without the border's ears, with a warning)."""
+    border): the bolus is one closed solid of genus 1 (Euler: V - E + F = 0) with no warning of
+    extra tunnels (where the teeth leave tunnels at the rim, make_shell makes the solid again
+    without the border's ears and says so), and the report counts the hole."""
     bpy = bpy_addon
     V, F = hemisphere_arrays(R=12.0, rings=12, na=48)
     keep = V[F].mean(axis=1)[:, 2] < 12.0 * math.cos(math.radians(35.0))
@@ -404,7 +408,7 @@ def test_region_with_a_hole_keeps_it_open(bpy_addon, scene, capfd):
     E = np.unique(np.sort(np.stack([T, np.roll(T, -1, axis=1)], axis=2).reshape(-1, 2), axis=1), axis=0)
     assert len(np.unique(T)) - len(E) + len(T) == 0, "not one solid with one hole through it"
     assert bolus["bolus_holes"] == 1 and "1 hole kept open" in out, out
-    assert "more tunnel" not in out and "48 teeth" in out, out
+    assert "more tunnel" not in out, out
     # nothing of the solid above the hole's rim: the hole goes through
     top = np.linalg.norm(Vb[:, :2], axis=1) < 12.0 * math.sin(math.radians(35.0)) - 2 * RES_CAP
     assert not top.any()

@@ -140,7 +140,7 @@ def test_blender_installs_the_zip_and_runs_segment_and_unfold(built_zip, tmp_pat
 def test_bundled_pins_are_ordered_for_blender_4_2():
     """cp311 pins above the cp313 ones (see build_extension): checked, and refused otherwise."""
     pins = build_extension.check_pins()
-    assert set(pins) == {"scipy", "scikit-learn", "manifold3d"}
+    assert set(pins) == {"scipy", "scikit-learn", "manifold3d", "libigl"}
     for v in pins.values():
         assert set(v) == {"cp311", "cp313"}
     with pytest.MonkeyPatch.context() as mp:

@@ -1,11 +1,11 @@
-"""The voxel part of the bolus shell: manifold3d's level-set grid, the
-field of `distance_field.SkinDistance` on its two lattices (exact only where it decides the
-surface), and `Manifold.level_set` with a lookup callback.  Split from shell.py.
+"""The voxel part of the bolus shell: the grid, the field of `distance_field.SkinDistance` on
+it (exact only where it decides the surface) and its zero surface.
 
-The field is positive inside the solid (see distance_field).  manifold3d's level set takes a
-per-point Python callable only, so the field is computed vectorised beforehand on exactly the
-points the level set will ask for (the body-centred cubic grid of manifold's sdf.cpp) and the
-callback just looks them up.
+The field is positive inside the solid (see distance_field).  By default it is sampled on one
+cubic lattice and meshed by `marching.marching_manifold` (libigl's compiled marching cubes on
+the cubes the surface crosses).  The peer, manifold3d's level set, takes a per-point Python
+callable only, so for it the field is computed beforehand on exactly the points it asks for
+(the body-centred cubic grid of manifold's sdf.cpp) and the callback just looks them up.
 """
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ import numpy as np
 import manifold3d as m3
 
 from ..errors import BolusError
+from .marching import marching_manifold
 
 __all__ = ["_Grid", "_coarse_terms", "_field_coarse_to_fine", "_level_set_fast", "_tight_box",
            "_solid_on_grid", "_progress"]
@@ -173,26 +174,44 @@ def _tight_box(skin, t, res):
     return P.min(axis=0) - 3 * res, P.max(axis=0) + 3 * res
 
 
-def _solid_on_grid(skin, grid, t, c, progress, stats):
-    """The field on the grid's two lattices and its level set (a Manifold)."""
+MESHERS = ("cubes", "level_set")  #: libigl's marching cubes on one lattice; manifold3d's level set on two
+
+
+def _solid_on_grid(skin, grid, t, c, progress, stats, mesher: str = "cubes"):
+    """The field on the grid and its zero surface (a Manifold).
+
+    mesher "cubes": the field on lattice 0 only, meshed by `marching.marching_manifold`;
+    "level_set": on both lattices of manifold3d's body-centred grid, meshed by
+    `Manifold.level_set` (the slower peer the shell benchmark measures beside it)."""
+    if mesher not in MESHERS:
+        raise ValueError(f"mesher must be one of {MESHERS}, got {mesher!r}")
     T0 = time.process_time()
     rim_cap = 3.0 * float(grid.sp.max())
     band = t + 3.0 * float(grid.sp.max()) + skin.tri_rmax
     coarse = _coarse_terms(skin, grid, t, c, band)
-    f0, n0 = _field_coarse_to_fine(skin, grid, 0, t, c, rim_cap, band, coarse, progress, 0.05, 0.30)
-    f1, n1 = _field_coarse_to_fine(skin, grid, 1, t, c, rim_cap, band, coarse, progress, 0.30, 0.55)
+    p_mid = 0.55 if mesher == "level_set" else 0.45
+    f0, n0 = _field_coarse_to_fine(skin, grid, 0, t, c, rim_cap, band, coarse, progress, 0.05, 0.30 if
+                                   mesher == "level_set" else p_mid)
+    f1, n1 = None, 0
+    if mesher == "level_set":
+        f1, n1 = _field_coarse_to_fine(skin, grid, 1, t, c, rim_cap, band, coarse, progress, 0.30, p_mid)
     del coarse
     stats["exact_points"] = stats.get("exact_points", 0) + n0 + n1
-    stats["grid_points"] = stats.get("grid_points", 0) + grid.points
-    if not (np.max(f0, initial=-1.0) > 0 or np.max(f1, initial=-1.0) > 0):
+    stats["grid_points"] = stats.get("grid_points", 0) + (grid.points if mesher == "level_set"
+                                                          else int(np.prod(grid.shape0)))
+    if not (np.max(f0, initial=-1.0) > 0 or (f1 is not None and np.max(f1, initial=-1.0) > 0)):
         raise BolusError("the region is too small for this resolution: no voxel lies inside the shell; choose a "
                          "finer resolution or a larger region")
     stats["field_s"] = stats.get("field_s", 0.0) + time.process_time() - T0
-    _progress(progress, 0.55, "level set")
+    _progress(progress, p_mid, "marching cubes" if mesher == "cubes" else "level set")
     T1 = time.process_time()
-    M = _level_set_fast(grid, f0, f1)
+    if mesher == "cubes":
+        M = marching_manifold(f0, grid.lo - grid.sp, grid.sp)
+    else:
+        M = _level_set_fast(grid, f0, f1)
     del f0, f1
     stats["level_set_s"] = stats.get("level_set_s", 0.0) + time.process_time() - T1
+    stats["mesher"] = mesher
     if str(M.status()).split(".")[-1] != "NoError" or M.is_empty():
-        raise BolusError(f"the volume step failed (manifold3d level set: {M.status()}); try a coarser resolution")
+        raise BolusError(f"the volume step failed ({mesher}: {M.status()}); try a coarser resolution")
     return M

@@ -156,7 +156,9 @@ def test_clearance_moves_the_inner_face_out():
     np.testing.assert_allclose(sh.V[mid(inner), 2], 2.0, atol=1e-6)
     np.testing.assert_allclose(sh.V[mid(outer), 2], 8.0, atol=1e-6)
     assert sh.thickness_mean == pytest.approx(6.0, abs=0.05)
-    assert sh.volume_mm3 == pytest.approx(60 * 60 * 6.0, rel=0.01)
+    # the mesher cuts each of the two creases along the 240 mm rim (rim wall with inner and outer
+    # face) by a chamfer of at most half a voxel square: at most 240 * res^2 in all
+    assert 0 <= 60 * 60 * 6.0 - sh.volume_mm3 <= 240 * 1.5 ** 2
 
 
 def test_others_collision_names_the_spot():
@@ -230,7 +232,7 @@ def test_progress_reports_stages():
     fr = [f for f, _ in seen]
     assert fr == sorted(fr) and fr[0] == 0.0 and fr[-1] == 1.0
     texts = {s for _, s in seen}
-    assert {"distance field", "level set", "checks"} <= texts
+    assert {"distance field", "marching cubes", "checks"} <= texts
 
 
 def curled_sheet(na=6, ny=12):
@@ -507,14 +509,17 @@ def test_drop_border_ears_removes_the_saw_and_keeps_the_loops():
 
 @pytest.mark.parametrize("res", [1.0, 0.5])
 def test_saw_tooth_hole_border_gives_one_tunnel(res):
-    """The dome with the saw-tooth hole: the tunnels the teeth leave are found (topology check) and
-    the shell is made again without the teeth: one solid of genus 1, the teeth named."""
+    """The dome with the saw-tooth hole gives one solid of genus 1: either the mesher leaves no
+    tunnel at the teeth, or the tunnels are found (topology check) and the shell is made again
+    without the teeth, which a warning names."""
     V, F = _zigzag_dome()
     s = make_shell(V, F, 4.0, 0.0, res)
     r = closed_report(s.V, s.F)
     assert r["closed"] and r["components"] == 1 and r["genus"] == 1, r
-    assert s.holes == 1 and not any("tunnel" in w for w in s.warnings[1:]), s.warnings
-    assert "48 teeth" in s.warnings[0] and s.stats["border_teeth_dropped"] == 48
+    assert s.holes == 1 and not any("tunnel" in w for w in s.warnings), s.warnings
+    dropped = s.stats.get("border_teeth_dropped", 0)
+    assert dropped in (0, 48)
+    assert (dropped == 48) == any("48 teeth" in w for w in s.warnings), s.warnings
 
 
 def test_topology_warning_counts_extra_tunnels():
