@@ -163,12 +163,34 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
     warnings: list[str] = []
     M = _drop_crumbs(M, warnings)
     skin_topo = MeshTopology(skin_V, skin_F)
-
-    # 1-2: neighbours and their planes
     report(0.05, "common planes")
-    pairs = skin_neighbours(skin_F, lab, skin_topo)
-    plane_rows, plane_pairs = [], []
-    for i, j, _ in pairs:
+    planes = _common_planes(skin_V, skin_F, lab, skin_topo, rng, warnings)
+    report(0.15, "cells")
+    tree = cKDTree(skin_topo.centroids)
+    cells, owners, vols = _owned_cells(M, planes, rid, side, tree, lab, k)
+    planes, owner_of = _separate_regions(cells, owners, vols, planes, rng, warnings)
+    report(0.4, "parts")
+    part_M, plane_of_id = _cut_parts(M, planes, owner_of, k, report, warnings)
+    plain = _tidy_parts(part_M, float(M.volume()), warnings)
+    report(0.75, "joints")
+    joints = _joints(part_M, planes, plane_of_id)
+    conn_ids = _place_connectors(joints, part_M, planes, (V, F, side), clearance, connectors, tree,
+                                 skin_topo.face_normals, warnings)
+    report(0.95, "faces")
+    Vs, Fs, labels, sides = _part_faces(part_M, rid, side, conn_ids)
+    report(1.0, "done")
+    return SolidParts(V=Vs, F=Fs, labels=labels, side=sides, volumes_mm3=np.array([float(P.volume()) for P in part_M]),
+                      joints=sorted(joints, key=lambda J: J.parts), warnings=warnings, plain_volumes_mm3=plain,
+                      solid_volume_mm3=solid_volume, planes=planes)
+
+
+def _common_planes(skin_V, skin_F, lab, skin_topo, rng, warnings) -> np.ndarray:
+    """Steps 1-2: the SVM plane (eqs. 6-38..6-40) of each pair of neighbouring parts, fitted on
+    the skin vertices each part does not share with the other.  Returns planes (p,4) rows
+    (unit normal from the lower label to the higher, offset); warns when a plane leaves over
+    WRONG_SIDE_WARN of the two parts' skin vertices on the wrong side."""
+    plane_rows = []
+    for i, j, _ in skin_neighbours(skin_F, lab, skin_topo):
         vi = np.unique(skin_F[lab == i])
         vj = np.unique(skin_F[lab == j])
         only_i, only_j = np.setdiff1d(vi, vj), np.setdiff1d(vj, vi)
@@ -177,12 +199,14 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
             warnings.append(f"the joint plane between parts {i} and {j} leaves {100 * wrong:.1f} % of their skin "
                             "on the other part's side: their border is far from straight")
         plane_rows.append(np.r_[n, off])
-        plane_pairs.append((i, j))
-    planes = np.array(plane_rows, dtype=np.float64).reshape(-1, 4)
+    return np.array(plane_rows, dtype=np.float64).reshape(-1, 4)
 
-    # 3: cells and their owners
-    report(0.15, "cells")
-    tree = cKDTree(skin_topo.centroids)
+
+def _owned_cells(M, planes, rid, side, tree, lab, k) -> tuple[list, list, list]:
+    """Step 3, first half: the solid M split by every plane (p,4) into cells, each given to the
+    part whose skin lies under it (area vote over the skin KD-tree `tree`), then groups cut off
+    from their part's largest group given to the part they share most plane face with.
+    Returns (cells [Manifold], owners [int], volumes [float mm^3])."""
     cells, owners = [M], [None]
     for n_off in planes:
         cells, owners = _split_cells(cells, owners, n_off[:3], n_off[3])
@@ -190,20 +214,45 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
     vols = [float(c.volume()) for c in cells]
     if len(cells) > 1:
         owners = _connected_owners(owners, vols, _cell_contacts(_cell_sections(cells, planes)))
+    return cells, owners, vols
+
+
+def _owner_volumes(cis, owners, vols) -> dict:
+    """{owner: volume mm^3} of the cells cis (in the order the owners first appear)."""
+    per = {}
+    for ci in cis:
+        per[owners[ci]] = per.get(owners[ci], 0.0) + vols[ci]
+    return per
+
+
+def _regions(cells, planes) -> dict:
+    """{sign tuple (one ±1 per plane): [cell index]}: the cells of each region of the plane arrangement."""
+    signs = [_signs(c, planes) for c in cells] if len(planes) else [() for _ in cells]
+    regions: dict = {}
+    for ci, s in enumerate(signs):
+        regions.setdefault(s, []).append(ci)
+    return regions
+
+
+def _region_conflict(regions, owners, vols):
+    """The first region holding at least CRUMB_MM3 of two parts' cells, as (signs, cells,
+    {owner: volume}), or None (slivers are not worth a plane)."""
+    for s, cis in regions.items():
+        per = _owner_volumes(cis, owners, vols)
+        if len(per) > 1 and sorted(per.values())[-2] >= CRUMB_MM3:
+            return s, cis, per
+    return None
+
+
+def _separate_regions(cells, owners, vols, planes, rng, warnings) -> tuple[np.ndarray, dict]:
+    """Step 3, second half: while a region of the arrangement holds two parts' cells, an extra
+    SVM plane between the two largest (at most MAX_EXTRA_PLANES, only while it separates them
+    to within 1 %); then each region goes to the part of most volume in it, and what other
+    parts had there is warned about.  Returns (planes (p',4) with the extra ones last, {region signs: owner})."""
     extra = 0
     while True:
-        signs = [_signs(c, planes) for c in cells] if len(planes) else [() for _ in cells]
-        regions: dict = {}
-        for ci, s in enumerate(signs):
-            regions.setdefault(s, []).append(ci)
-        conflict = None
-        for s, cis in regions.items():
-            per = {}
-            for ci in cis:
-                per[owners[ci]] = per.get(owners[ci], 0.0) + vols[ci]
-            if len(per) > 1 and sorted(per.values())[-2] >= CRUMB_MM3:  # slivers are not worth a plane
-                conflict = (s, cis, per)
-                break
+        regions = _regions(cells, planes)
+        conflict = _region_conflict(regions, owners, vols)
         if conflict is None or extra >= MAX_EXTRA_PLANES:
             break
         s, cis, per = conflict
@@ -219,9 +268,7 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
         extra += 1
     owner_of: dict = {}
     for s, cis in regions.items():
-        per = {}
-        for ci in cis:
-            per[owners[ci]] = per.get(owners[ci], 0.0) + vols[ci]
+        per = _owner_volumes(cis, owners, vols)
         best = max(per, key=per.get)
         owner_of[s] = best
         for o, v in per.items():
@@ -230,30 +277,39 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
                                 f"plane and goes with part {best} (a plane crosses the shell twice there)")
     if extra:
         warnings.append(f"{extra} extra cutting plane(s) were needed where a joint plane crosses the shell twice")
+    return planes, owner_of
 
-    # 4: parts
-    report(0.4, "parts")
+
+def _half_spaces(M, planes) -> tuple:
+    """The bounding box of M (padded by 10 % of its diagonal + 10 mm) and its halves by every
+    plane (p,4): (box, {(plane, ±1): half box}, {face id of a cut face: plane index})."""
     lo, hi = np.asarray(M.bounding_box()[:3]), np.asarray(M.bounding_box()[3:])
     pad = 0.1 * float(np.linalg.norm(hi - lo)) + 10.0
     box = m3.Manifold.cube(tuple((hi - lo) + 2 * pad)).translate(tuple(lo - pad))
     box_ids = _ids(box)
-    half = {}
-    plane_of_id = {}
+    half, plane_of_id = {}, {}
     for p, row in enumerate(planes):
         for s in (1, -1):
             H = box.trim_by_plane(tuple(s * row[:3]), float(-s * row[3]))
             half[(p, s)] = H
             for i in _ids(H) - box_ids:
                 plane_of_id[i] = p
+    return box, half, plane_of_id
+
+
+def _cut_parts(M, planes, owner_of, k, report, warnings) -> tuple[list, dict]:
+    """Step 4: each part q = M ∩ K_q, K_q the union of the convex polytopes of its region terms
+    (`_region_terms`: the box trimmed by half-spaces).  A part that got no region is empty and
+    warned about.  Returns ([Manifold] k parts, {face id: plane index})."""
+    box, half, plane_of_id = _half_spaces(M, planes)
     part_M = []
     for q in range(k):
         if q not in owner_of.values():
             warnings.append(f"part {q} got no material: its skin area lies on other parts' side of the joint planes")
             part_M.append(m3.Manifold())
             continue
-        terms = _region_terms(owner_of, q)
         polys = []
-        for t in terms:
+        for t in _region_terms(owner_of, q):
             if not t:
                 polys.append(box)
             else:
@@ -262,6 +318,17 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
         K = polys[0] if len(polys) == 1 else m3.Manifold.batch_boolean(polys, m3.OpType.Add)
         part_M.append(M ^ K)
         report(0.4 + 0.3 * (q + 1) / k, f"part {q}")
+    # evaluated here, while the last part's polytopes are still held: manifold3d flattens only the
+    # boolean nodes nothing else holds, so this decides the parts' triangulation
+    for P in part_M:
+        P.is_empty()
+    return part_M, plane_of_id
+
+
+def _tidy_parts(part_M, solid_volume, warnings) -> np.ndarray:
+    """Step 4, end: slivers under CRUMB_MM3 dropped from the parts (in place), warnings for them,
+    for volumes that do not add up to the solid's (VOLUME_RTOL) and for parts in several pieces.
+    Returns the plain volumes (k,) mm^3."""
     slivers = []
     for q, P in enumerate(part_M):
         pieces = P.decompose() if not P.is_empty() else []
@@ -274,7 +341,7 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
         warnings.append(f"{len(slivers)} sliver(s) under {CRUMB_MM3:g} mm³ that the joint planes cut off "
                         f"({sum(slivers):.3g} mm³ in all) are left out of the parts")
     plain = np.array([float(P.volume()) for P in part_M])
-    kept = float(M.volume()) - sum(slivers)
+    kept = solid_volume - sum(slivers)
     if abs(plain.sum() - kept) > VOLUME_RTOL * kept + 1e-6:
         warnings.append(f"the parts' volumes add up to {plain.sum():.1f} mm³, the solid's is {kept:.1f} mm³")
     for q, P in enumerate(part_M):
@@ -285,21 +352,29 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
             warnings.append(f"part {q} falls into {len(pieces)} pieces ("
                             + ", ".join(f"{v:.0f}" for v in pieces) + " mm³): print them separately or choose "
                             "another number of parts")
+    return plain
 
-    # 5: joints and connectors
-    report(0.75, "joints")
-    joints = _joints(part_M, planes, plane_of_id)
+
+def _place_connectors(joints, part_M, planes, solid, clearance, connectors, tree, skin_normals, warnings) -> set:
+    """Step 5: the main joint of each pair (largest face first) gets its pegs and holes
+    (`joints._connect`, parts changed in place) or a note why not.  solid: (V, F, side) of the
+    whole solid (wall thickness probe).  Returns the manifold ids of the connectors' faces."""
     conn_ids: set = set()
     keepout: dict = {}
-    wall = _wall_probe(V, F, side)
+    wall = _wall_probe(*solid)
     for J in sorted(joints, key=lambda J: -J.area_mm2):
         if J.note is not None:  # a second face of a pair: the pair's main joint carries the connectors
             continue
         if not connectors:
             J.note = "connectors not asked for"
             continue
-        _connect(J, part_M, planes, clearance, conn_ids, keepout, tree, skin_topo.face_normals, wall, warnings)
-    report(0.95, "faces")
+        _connect(J, part_M, planes, clearance, conn_ids, keepout, tree, skin_normals, wall, warnings)
+    return conn_ids
+
+
+def _part_faces(part_M, rid, side, conn_ids) -> tuple:
+    """The parts' faces in one array pair: V (n,3), F (m,3), part label (m,) and SIDE_* (m,) of
+    each face (the solid's own faces keep their side, cut faces SIDE_CUT, connectors' SIDE_CONNECTOR)."""
     Vs, Fs, labels, sides = [], [], [], []
     base = 0
     for q, P in enumerate(part_M):
@@ -315,10 +390,6 @@ def split_solid(V, F, side, skin_V, skin_F, skin_labels, *, clearance: float = c
         base += len(Vq)
         labels.append(np.full(len(Fq), q, dtype=np.int64))
         sides.append(sd)
-    report(1.0, "done")
-    return SolidParts(
-        V=np.vstack(Vs) if Vs else np.zeros((0, 3)), F=np.vstack(Fs) if Fs else np.zeros((0, 3), np.int64),
-        labels=np.concatenate(labels) if labels else np.zeros(0, np.int64),
-        side=np.concatenate(sides) if sides else np.zeros(0, np.int8),
-        volumes_mm3=np.array([float(P.volume()) for P in part_M]), joints=sorted(joints, key=lambda J: J.parts),
-        warnings=warnings, plain_volumes_mm3=plain, solid_volume_mm3=solid_volume, planes=planes)
+    return (np.vstack(Vs) if Vs else np.zeros((0, 3)), np.vstack(Fs) if Fs else np.zeros((0, 3), np.int64),
+            np.concatenate(labels) if labels else np.zeros(0, np.int64),
+            np.concatenate(sides) if sides else np.zeros(0, np.int8))
