@@ -1,68 +1,22 @@
 """Thick sheets: the mid-surface to unfold and the sheet-or-print advice.
 
-A sheet of thickness t laid on the skin bends about its middle: its skin side is
-compressed and its outer side stretched by about +-t / (2 R) where the skin bends to
-radius R.  The piece to cut is therefore the *mid-surface*, the skin moved out by t/2,
-and where R < `SHEET_RADIUS_FACTOR` t (5 t: +-10 % strain) a sheet should not be used.
+A sheet of thickness t (mm) laid on the skin bends about its middle, strained by about +-t / (2 R)
+where the skin bends to radius R: the piece to cut is the mid-surface, the skin moved out by t/2,
+and where R < `SHEET_RADIUS_FACTOR` t (5 t: +-10 % strain) a sheet should not be used.  Input
+V (n,3) mm, F (m,3); normals and curvature are taken at the analysis scale sigma (mm):
 
-Scale.  Scanner noise tilts the raw vertex normals (eq. 3-2) by several degrees from one
-vertex to the next, so moving the skin by t/2 along them shakes the mid-surface sideways
-by about t/2 sin(tilt) and curvature taken from them is noise (measured on a 20k-triangle
-face region of nefertiti.obj at t = 10 mm: 1,855 folded offset triangles along the raw
-normals, none along the fitted ones).  Normals and curvature are therefore taken at the
-analysis scale sigma (`saliency.DEFAULT_SMOOTHING_MM`, as in `smooth_for_analysis`):
+* `principal_curvatures`: per vertex the unit normal (n,3) and k1 >= k2 (n,) in 1/mm, from a
+  weighted least-squares linear field fitted to the neighbours' raw normals (eq. 3-2), two passes;
+  k > 0 where the surface bends away from the side its normals point to;
+* `mid_surface`: every vertex moved by t/2 along its normal, at most `CLAMP_FRACTION` of the concave
+  radius 1 / |k2|, halved on triangles that would fold (`folded_triangles`, `MIN_AREA_RATIO`);
+* `piece_bending`: per piece R_min = 1 / the area-weighted (1 - `BENDING_AREA_SHARE`) quantile of
+  max(|k1|, |k2|), strain t / (2 R_min); "sheet" iff R_min >= 5 t and EL <= max_el, else "print";
+* `check_sheet_thickness`: a thickness above the region's width (`region_width`, mm) is refused.
 
-  `principal_curvatures`: around every vertex i, the raw normals n_j of its neighbours
-  (the `WINDOW_NEIGHBOURS` nearest, Gaussian weights exp(-|x_j - x_i|^2 / (2 h^2)) times
-  their lumped mass, h = max(sigma, distance to the `MIN_WINDOW_NEIGHBOURS`-th nearest),
-  leaving out neighbours whose raw normal faces away: the far side of a thin wall) are
-  fitted by least squares with a linear field n(u, v) = c + g_u u + g_v v in the tangent
-  frame (u, v) of i; a second pass fits the first pass's normals c the same way.  The
-  normal is c / |c|; the shape operator is [[g_u.e1, g_v.e1], [g_u.e2, g_v.e2]]
-  (symmetrised), its eigenvalues k1 >= k2 the principal curvatures (1/mm).
+NaN/inf, bad indices and zero-area triangles raise `BolusError` (`topology.check_mesh`).
 
-A local *linear* fit has no first-order bias where the window is one-sided, at the
-region's border; smoothing the normals by heat diffusion (natural boundary condition)
-kills their change across the border: on an open cylinder piece of radius 30 mm at
-t = 10 mm it left the mid-surface's edges along the border 12 % short (the fit: 0.3 %).
-Sign: k > 0 where the surface bends away from the side its normals point to (a sphere
-with outward normals has k1 = k2 = 1/R); k < 0 where it is concave towards that side
-(curvature.py's eq. 6-17 uses the opposite sign).  Noise: on a cap of radius 40 mm with
-1.5 mm edges and 0.15 mm of noise, R_min (below) is 35 mm at sigma = 3 mm.
-
-Mid-surface (`mid_surface`): every vertex moves by t/2 along its normal (the side the face
-normals point to), a true distance in mm.  Where the surface is concave towards that
-side with radius r = 1 / |k2|, the offset surface folds over once t/2 >= r; the offset is
-limited to `CLAMP_FRACTION` r (half the local radius, so it acts where r < t: the
-mid-surface there keeps at least half the skin's radius; continuous in r, unlike a clamp
-only below t/2, where the offset surface would already nearly collapse).  Then no
-offset triangle may flip against its skin triangle nor collapse: its area projected on
-the skin triangle's normal must stay above `MIN_AREA_RATIO` of the skin triangle's and
-none of its edges may point backwards (`folded_triangles`); the offsets of the corners
-of any triangle that fails are halved until none does (folds finer than sigma, which
-the curvature at sigma does not see).  `MidSurface.clamped` marks every vertex moved by
-less than t/2.
-
-Bending (`piece_bending`): per piece the smallest principal radius R_min is taken from
-the larger principal curvature magnitude kmax = max(|k1|, |k2|) (per triangle: the mean
-over its corners).  The raw maximum of kmax is noise (one vertex decides), so R_min =
-1 / q with q the area-weighted (1 - `BENDING_AREA_SHARE`) quantile of kmax: the radius
-that the most tightly curved 5 % of the piece's area reaches.  Strain = t / (2 R_min);
-advice "sheet" iff R_min >= 5 t and EL <= max_el, else "print" with the reason.
-
-Size (`check_sheet_thickness`): the region's width is twice the largest distance of a
-point from its boundary, measured along the mesh edges from its vertices (`region_width`:
-the diameter of the largest inscribed circle, over-estimated by the zigzag of the edge
-paths; a strip one triangle wide counts its edges across); a closed region uses the
-smallest extent of its vertices along their principal axes.  A thickness above the width
-is refused.
-
-Degenerate input: NaN/inf, bad indices and zero-area triangles (coincident or collinear
-vertices: no normal, and the unfolding of the mid-surface refuses them) raise
-`BolusError` naming them (`topology.check_mesh`).  Needle triangles are sound (positive
-area: a normal, and a weight as tiny as their area).  Non-manifold edges are sound: every
-triangle adds to its corners' normals as usual.  Vertices in no triangle do not move
-(offset 0, not clamped) and have curvature 0 and a zero normal.
+Design notes: docs/design/unfold.md.
 """
 from __future__ import annotations
 
@@ -98,7 +52,7 @@ __all__ = [
 #: a sheet is advised only where the skin's smallest radius is at least this times the
 #: thickness (strain t / (2 R) at most 10 %)
 SHEET_RADIUS_FACTOR = 5.0
-#: the offset never exceeds this fraction of the local concave radius (module doc)
+#: the offset never exceeds this fraction of the local concave radius (docs/design/unfold.md)
 CLAMP_FRACTION = 0.5
 #: an offset triangle keeps at least this share of its skin triangle's (projected) area
 MIN_AREA_RATIO = 0.05
@@ -114,7 +68,7 @@ _FLIP_ROUNDS = 60
 
 @dataclass
 class MidSurface:
-    """The mid-surface of a sheet on the skin (module doc).
+    """The mid-surface of a sheet on the skin (docs/design/unfold.md).
 
     V (n,3) mm: the skin moved out by offset along normals; offset (n,) mm actually moved
     (t/2, less where clamped); clamped (n,) bool: moved less than t/2; normals (n,3) unit
@@ -212,7 +166,7 @@ def principal_curvatures(V, F, sigma_mm: float = DEFAULT_SMOOTHING_MM,
                          topo: MeshTopology | None = None) -> PrincipalCurvatures:
     """Principal curvatures k1 >= k2 (n,) 1/mm and unit normals (n,3) at the analysis scale.
 
-    V (n,3) mm, F (m,3); sigma_mm >= 0 the window scale (module doc; 0: the smallest window
+    V (n,3) mm, F (m,3); sigma_mm >= 0 the window scale (docs/design/unfold.md; 0: the smallest window
     the mesh allows, about two rings); topo: the `MeshTopology` of (V, F) if at hand.
     Vertices in no triangle get k = 0 and a zero normal.  `BolusError` on NaN/inf, bad
     indices and zero-area triangles.
@@ -261,7 +215,7 @@ def _curvatures(topo: MeshTopology, sigma_mm, given: PrincipalCurvatures | None)
 
 def mid_surface(V, F, thickness_mm, *, sigma_mm: float = DEFAULT_SMOOTHING_MM,
                 curvatures: PrincipalCurvatures | None = None) -> MidSurface:
-    """The skin V (n,3) mm, F (m,3) moved out by thickness_mm / 2 along its normals (module doc).
+    """The skin V (n,3) mm, F (m,3) moved out by thickness_mm / 2 along its normals (docs/design/unfold.md).
 
     thickness 0: V unchanged (a copy), offset 0.  The offset is clamped where the surface is
     concave towards the offset side with radius under t / (2 `CLAMP_FRACTION`), then
@@ -311,7 +265,7 @@ def folded_triangles(V, W, F) -> np.ndarray:
 
 
 def region_width(V, F) -> float:
-    """The region's width in mm (module doc): twice the largest distance from the boundary of
+    """The region's width in mm (docs/design/unfold.md): twice the largest distance from the boundary of
     a vertex (edge paths) or of the middle of an inner edge joining two border vertices (half
     its length: a strip one triangle wide has no inner vertex), at least the largest
     inscribed circle of a triangle; a closed region: its smallest extent along its
@@ -337,7 +291,7 @@ def region_width(V, F) -> float:
 
 def check_sheet_thickness(V, F, thickness_mm) -> None:
     """`BolusError` when the sheet thickness is larger than the region's width
-    (`region_width`, module doc) or not a number >= 0; the message gives the width in mm
+    (`region_width`, docs/design/unfold.md) or not a number >= 0; the message gives the width in mm
     and what to choose.  V (n,3) mm, F (m,3)."""
     t = check_thickness(thickness_mm)
     width = region_width(V, F)
@@ -360,7 +314,7 @@ def _weighted_quantile(x: np.ndarray, w: np.ndarray, q: float) -> float:
 
 def piece_bending(V, F, piece, thickness_mm, EL, max_el, sigma_mm: float = DEFAULT_SMOOTHING_MM, *,
                   curvatures: PrincipalCurvatures | None = None) -> list[PieceBending]:
-    """Bending strain and sheet-or-print advice of every piece (module doc).
+    """Bending strain and sheet-or-print advice of every piece (docs/design/unfold.md).
 
     V (n,3) mm, F (m,3): the SKIN region (not the mid-surface); piece (m,) int: the piece
     of every triangle (-1: none); thickness_mm >= 0; EL: sequence, the EL of pieces 0..p-1

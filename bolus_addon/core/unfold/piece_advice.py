@@ -1,43 +1,21 @@
 """Which remedy a badly flattened piece needs: angle deficit or angle excess (seed ch. 4.1.1).
 
-A piece of skin lies flat without stretch only where every interior vertex has the
-angle of a flat sheet around it.  With the angle sum theta(v) of eq. 4-1 and
-varpi(v) = |theta(v) - 2 pi| (eq. 4-1), the piece's total sum varpi (eq. 4-2, with
-FLV = 10 * 0.5 ** sum varpi, eq. 4-3) splits by sign into
+With the angle sum theta(v) of eq. 4-1 and the angle defect K(v) = 2 pi - theta(v) (rad) of the
+interior vertices, a piece's sum varpi (eqs. 4-1, 4-2; FLV of eq. 4-3) splits by sign into
 
   deficit  D = sum over interior v of max(K(v), 0)    (nose tip, chin, a cap)
   excess   X = sum over interior v of max(-K(v), 0)   (eq. 4-4: pocket rims, grooves, folds)
 
-with the angle defect K(v) = 2 pi - theta(v) (below: diffused at the analysis scale).
-
-The sign decides the remedy (garment pattern making uses the same rule):
-
-* a deficit flattens by stretching the sheet outwards; a cut from the edge towards
-  the point opens into a V (a dart) and smaller pieces carry less of it, so more /
-  smaller patches or a dart lower the error;
-* an excess means more material than a flat sheet has room for: a cut makes the sides
-  overlap and smaller patches around a pocket only make its rim worse (nostril
-  pockets: EA 71 % at 6 patches).  The cavity has to leave the treatment area (deselect
-  it in Edit Mode), be split into separate pieces along the groove (a split through
-  the excess does help: the demo's groove piece, EL 2.7 %, is 1.6 % and 1.3 % in two),
-  or be covered by the printed bolus.
-
-Scanner noise is bumps of both signs side by side: on the raw angle sums a noisy dome
-shows nearly as much excess as deficit.  `piece_advice` therefore measures X and D on
-the angle defect K(v) = 2 pi - theta(v) (interior vertices) diffused over the surface
-at the analysis scale sigma, like the positions in `saliency.smooth_for_analysis`:
+with K first diffused over the surface at the analysis scale sigma (mm), `diffused_defect`:
 
     (M + t L) rho = K,   K' = M rho,   t = sigma^2 / 2,
 
-(L the cotangent stiffness, M the lumped mass; rho is the defect per unit area).  The
-total sum K' = sum K (the piece's total curvature, Gauss-Bonnet) is kept, neighbouring
-bumps of opposite sign cancel, and a feature larger than sigma (a pocket, a dome)
-keeps its sign.  Unlike smoothing the positions with the outline held, this leaves a
-clean dome with no excess at all.  Measured (sigma = 3 mm): spherical caps 0.00 excess
-share, also with 0.15 mm noise; nose tips 0.09-0.14; nostril pockets of held-out scans
-0.37-0.72 (splitting those into more patches made them worse: nefertiti EL 4.0 % at 3
-patches, 8.5 % at 6), a demosthenes nose piece 0.32 (EL 2.1 % at 3 patches, 9.7 % at 6);
-a Gaussian dimple 0.50; a saddle 1.00.
+L the cotangent stiffness, M the lumped mass, rho the defect per unit area (sum K' = sum K).
+`piece_advice` (V (n,3) mm, F (m,3), the piece's EL / EA) turns the sign into the remedy: a
+deficit wants a dart or smaller pieces; an excess (more material than a flat sheet has room for)
+wants the cavity out of the treatment area, a split along the groove, or the printed bolus.
+
+Design notes: docs/design/unfold.md.
 """
 from __future__ import annotations
 
@@ -56,7 +34,7 @@ __all__ = ["DEFAULT_WARN_FRACTION", "EXCESS_SHARE", "PieceAdvice", "diffused_def
 #: EL or EA above this fraction (3 %) makes a piece one a clinic should not cut as it is.
 DEFAULT_WARN_FRACTION = 0.03
 #: share X / (X + D) of the diffused angle defect from which the excess decides the remedy
-#: (between the nose tips' 0.14 and the nostril pockets' 0.37, module doc).
+#: (between the nose tips' 0.14 and the nostril pockets' 0.37: docs/design/unfold.md).
 EXCESS_SHARE = 0.3
 
 

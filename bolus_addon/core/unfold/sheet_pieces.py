@@ -1,46 +1,22 @@
 """Darts and splits: a patch made into sheet pieces that meet a length-error target.
 
-A patch whose pattern stretches more than ``max_el`` (EL, eq. 3-30) is refined.  The
-remedy follows the sign of the angle defect 2 pi - theta (eq. 4-1) diffused at the
-analysis scale (`piece_advice.diffused_defect`, seed 4.1.1; the rule of `piece_advice`,
-applied point by point):
+A patch (V (n,3) mm, F (m,3)) whose pattern stretches more than ``max_el`` (EL, eq. 3-30) is
+refined by the sign of the angle defect 2 pi - theta (eq. 4-1) diffused at the analysis scale
+(`piece_advice.diffused_defect`, seed 4.1.1), point by point:
 
-* at an angle deficit (nose tip, chin: theta < 2 pi) a DART: the shortest path along
-  mesh edges (Dijkstra on edge lengths) from the piece's boundary to the vertex, through
-  interior vertices only; the piece is cut along it (`cutting.split_along_edges`) and
-  the cut opens into a V in the pattern;
-* at an angle excess (grooves, pocket rims: theta > 2 pi) a SPLIT: boundary -> vertex w
-  -> boundary, the shortest interior path from w to the boundary, then the shortest one
-  from w to the same boundary loop that leaves w on the other side (`_split_paths`);
-  the two sides become separate pieces.  Splits go only through vertices at least
-  `SPLIT_DEPTH` of the piece's largest boundary distance deep, and the second leg's
-  nearest ends are tried until each side keeps `MIN_SPLIT_SHARE` of the area and
-  `MIN_PIECE_TRIANGLES` triangles (else the split is refused as too small);
-* a dome that no dart helped is split through its deficit points (smaller pieces carry
-  less of it).
+* at a deficit (theta < 2 pi) a DART: the shortest interior edge path from the piece's boundary
+  to the vertex, cut open (`boundary.split_along_edges`) into a V in the pattern;
+* at an excess (theta > 2 pi) a SPLIT: boundary -> vertex -> boundary (`_split_paths`), the two
+  sides separate pieces (`SPLIT_DEPTH`, `MIN_SPLIT_SHARE`, `MIN_PIECE_TRIANGLES`);
+* a dome that no dart helped is split through its deficit points.
 
-The loop (`sheet_pieces`), early decision first (issue point 2): every piece is judged
-from its angle sums, D and X the diffused deficit and excess: above EL_PER_RAD
-max(D, X) > max_el it misses for sure and is refined at once; at EL_HIGH_PER_RAD
-max(D, X) <= max_el it gets the full `unfold.unfold_patch` at once; in between a cheap
-trial decides (conformal start, `TRIAL_ITERS` L-BFGS iterations with the flip penalty,
-one short L1 refinement round, no overlap correction: 15-25 % of a full unfolding):
-above `TRIAL_SLACK` max_el it is refined without the full unfolding.  A piece misses
-when EL > max_el, EA > `EA_PER_EL` max_el, or any triangle is flipped or overlapping.
-The worst piece (trial score max(EL / max_el, EA / (EA_PER_EL max_el))) is refined
-first: its candidates (`_Run.candidates`: the `CANDIDATES` strongest local extremes of
-each sign by |defect|, then the splits through deficit points) are tried in order, at
-most `MAX_TRIES` of them unfolded, and the FIRST whose trial lowers the piece's score by
-`MIN_GAIN` is kept (first, not best: each try costs a trial).  If none does, the piece
-stays as it is and the reason is recorded.  Limits: `MAX_PIECES` pieces per patch
-(``max_pieces``), `MAX_DARTS` darts per piece.  A piece with a hole is cut to a disk once
-(`cutting.cut_to_disk`).  Every final piece gets one full unfolding (a piece refined after
-its full unfolding missed gets another one when it is final).
+`sheet_pieces` judges every piece from its angle sums (`EL_PER_RAD`, `EL_HIGH_PER_RAD`) or a cheap
+trial (`TRIAL_ITERS`, `TRIAL_SLACK`); a piece misses when EL > max_el, EA > `EA_PER_EL` max_el or
+a triangle is flipped or overlapping.  The worst piece is refined first, with the first candidate
+that lowers its score by `MIN_GAIN` (`CANDIDATES`, `MAX_TRIES`), up to `MAX_PIECES` pieces and
+`MAX_DARTS` darts per piece; every final piece gets one full `unfold.unfold_patch`.
 
-Measured on the 17 hard patches (bench/hard_patches.py;
-noses with nostrils, a nostril pocket, a finger tip; 122-2207 triangles) at max_el 2 %:
-all 17 meet EL <= 2 % and EA <= 3 % with 0 flipped / overlapping triangles, in 1-7
-pieces; one piece alone had EL 1.0-45 %.
+Design notes: docs/design/unfold.md.
 """
 from __future__ import annotations
 

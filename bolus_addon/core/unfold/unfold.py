@@ -1,8 +1,7 @@
 """Unfolding a patch into a true-scale flat pattern (seed 3.5, 4.5; eqs. 3-22..3-31, 4-22..4-25).
 
-`unfold_patch` flattens one disk-like patch, V (n,3) mm, F (m,3), into an `Unfolding` (UV
-(n2,2) mm, counter-clockwise); a patch that is not a topological disk is cut to one first
-(`cut_to_disk`).  Its stages, each in its own module:
+`unfold_patch` flattens one disk-like patch, V (n,3) mm, F (m,3), into an `Unfolding` (UV (n2,2) mm,
+counter-clockwise; a patch that is not a disk is cut to one first, `cut_to_disk`).  Its stages:
 
 1. start: the least-squares conformal map or the coordinate transformation of 4.5.1 (`initial_unfolding`);
 2. relaxation of the mass-spring model with crossed and disturbing springs (`springs`, 3.5, 4.5.2;
