@@ -44,14 +44,14 @@ BUDGET_ENV = "BOLUS_TIME_BUDGET_S"
 #: smooth_cuts = `cutlines.smooth_cuts` (3 patches), load 8: 50k 14.9 s, 150k 54.6 s;
 #: print_segment = `print_segmentation` (3 parts), load 8: 30k 16.4 s, 120k 20.0 s;
 #: make_shell: per voxel of the wall's band (area x wall / resolution^3, `shell_voxels`), not
-#:   triangles: `shell.make_shell` (10 mm) on the 45 mm nose-tip region (5,580 mm2), load 2.5:
-#:   1 mm (55.8k voxels) 8.9 s, 0.5 mm (446k) 48.6 s.
+#:   triangles: `shell.make_shell` (10 mm, marching cubes) on the 45 mm nose-tip region
+#:   (5,580 mm2), load 2.5: 1 mm (55.8k voxels) 1.5 s, 0.5 mm (446k) 6.6 s.
 COSTS = {
     "unfold": (42.0, 10_000, 1.7),
     "improve_flattenability": (22.0, 10_000, 0.75),
     "smooth_cuts": (54.6, 150_000, 1.18),
     "print_segment": (20.0, 120_000, 1.0),
-    "make_shell": (63.0, 446_000, 0.82),
+    "make_shell": (8.6, 446_000, 0.71),
 }
 #: seconds per triangle of the region an operator spends outside the step (read, check, write)
 OVERHEAD_S_PER_TRIANGLE = 2.0e-5

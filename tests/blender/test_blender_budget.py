@@ -28,7 +28,7 @@ def test_estimate_grows_with_the_pieces_and_inverts(monkeypatch):
         assert budget.estimate_s(step, [M, M]) == pytest.approx(2 * T)  # pieces one after another
         n = budget.max_triangles(step, 30.0)
         assert budget.estimate_s(step, n) <= 30.0 + 1e-9 < budget.estimate_s(step, n + max(n // 100, 1))
-        big = [3 * M, M]
+        big = [10 * M, M]  # over 30 s for every step
         r = budget.decimate_ratio(step, big, 30.0)
         assert 0 < r < 1
         assert budget.estimate_s(step, [int(r * m) for m in big]) <= 30.0  # the advised ratio fits
