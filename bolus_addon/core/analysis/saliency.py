@@ -6,24 +6,17 @@
   FLV      = 10 * 0.5 ** sum varpi                                 (eq. 4-3)
   s(v)     = theta(v) - 2 pi where positive, else 0                (eq. 4-4)
 
-Boundary and non-manifold vertices get varpi = s = 0: their one-ring is not a closed
-fan, so "lying flat" is not defined by the angle sum there (SPEC: "0 on boundary
-vertices").
-
-Real skin scans carry millimetre-scale noise that makes every vertex look curved
-(a 1,760-vertex nose cut from a scan has sum varpi ~ 36, the seed's smooth model 8).
-`smooth_for_analysis` therefore offers an analysis copy smoothed at a scale sigma in
-mm; angle sums are taken on that copy and mapped back one-to-one to the original
-vertices, which never move.  The smoothing is implicit heat diffusion of the vertex
-positions (Desbrun et al. 1999, the fairing the seed cites for eq. 4-11):
+Per vertex (n,), in rad, for V (n,3) mm, F (m,3); boundary and non-manifold vertices get
+varpi = s = 0.  `analyse` takes the angle sums on an analysis copy smoothed at a scale sigma
+(mm, `smooth_for_analysis`; 0 = the raw mesh) and maps them back one-to-one to the original
+vertices, which never move.  The smoothing is one implicit heat-diffusion step of the positions,
 
     (M + t K) V' = M V,   t = sigma^2 / 2,
 
-with K the cotangent stiffness matrix (positive semi-definite) and M the lumped
-(barycentric) mass matrix.  One implicit step has a kernel of standard deviation
-sqrt(2 t) = sigma, so sigma reads as "features smaller than about sigma mm are noise".
-Boundary and non-manifold vertices are held fixed so the outline of the region
-does not shrink.
+K the cotangent stiffness (`cotangent_stiffness`), M the lumped mass (`lumped_mass`), boundary
+and non-manifold vertices held fixed.
+
+Design notes: docs/design/analysis.md.
 """
 from __future__ import annotations
 

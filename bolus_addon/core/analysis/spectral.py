@@ -1,35 +1,22 @@
 """Saliency-aware spectral segmentation (seed 3.2 and 4.1.1, eqs. 3-3..3-8, 4-5).
 
-Pipeline of `segment`:
+`segment` (V (n,3) mm, F (m,3), k patches) returns a `Segmentation` (face labels (m,)), in six steps:
 
-1. vertex graph on the mesh edges with weights (eq. 3-4)
-       W_ij = exp(-d_ij^2 / (2 sigma^2)),  sigma = mean d_ij,
-       d_ij = eta * |s'_i - s'_j| + e'_ij                                   (eq. 4-5)
-   s' is the segmentation saliency (eq. 4-4) and e' the edge length, both mapped to
-   [0, 1].  The seed says only "transferred into interval between 0 and 1"; we map
-   e' by min-max between the 1st and 99th percentiles and s' = s / P99(s) (s >= 0 and
-   mostly 0), both clipped to [0, 1], so that a single spike of scanner noise cannot
-   squash every other value towards 0.  eta applies only where *both* ends have high saliency; the seed gives
-   no threshold, we call a vertex high-saliency when s' >= HIGH_SALIENCY (0.25, i.e.
-   at least a quarter of the region's 99th-percentile saliency; chosen on the face
-   meshes of bench/segment_bench.py, where 0.5 left the saliency term almost without
-   effect); elsewhere eta = 0.  d is clipped at 3 sigma (see `affinity`).
-2. L = D - W (eqs. 3-3, 3-5): symmetric, rows summing to 0, positive semi-definite.
-3. the k eigenvectors of the smallest eigenvalues (eq. 3-8, the RatioCut relaxation
-   of eq. 3-6), by shift-invert Lanczos (`scipy.sparse.linalg.eigsh`) with a start
-   vector drawn from ``rng`` so that results are reproducible.  Above
-   ``MULTILEVEL_MIN_VERTICES`` vertices (a whole head), coarse to fine instead
-   (`multilevel_eigenvectors`): the same eigenproblem on a graph of ~20-vertex
-   aggregates, prolonged and refined by LOBPCG with a two-level preconditioner.
-4. k-means (default) or a Gaussian mixture on the rows of U (n,k): `clustering.cluster_rows`,
-   the one clustering step (shared with print_segmentation.py).
-5. vertex clusters -> face labels by majority vote of the corners (so a face strip
-   along every border carries the shared border vertices: the seed's common
-   boundaries of 4.1.2); the triangles of one polygon are kept together.
-6. every label is split into its edge-connected components (the seed's
-   "Part3(1)/(2)"), and components smaller than ``min_patch_fraction`` of the area are
-   merged into the neighbour they share the longest border with.  Patches are
-   numbered by decreasing area.
+1. vertex graph on the mesh edges, W_ij = exp(-d_ij^2 / (2 sigma^2)), sigma = mean d_ij (eq. 3-4),
+   d_ij = eta |s'_i - s'_j| + e'_ij (eq. 4-5): s' the segmentation saliency (eq. 4-4) and e' the
+   edge length, both mapped to [0, 1] (`unit_interval`); eta only where both ends have
+   s' >= `HIGH_SALIENCY`; d clipped at `D_CLIP` sigma (`affinity`, `gaussian_weights`);
+2. L = D - W (eqs. 3-3, 3-5, `graph_laplacian`);
+3. the k eigenvectors of the smallest eigenvalues (eq. 3-8, the RatioCut relaxation of eq. 3-6),
+   by shift-invert Lanczos seeded from ``rng`` (`smallest_eigenvectors`), or coarse to fine above
+   `MULTILEVEL_MIN_VERTICES` vertices (`spectral_multilevel`);
+4. k-means (default) or a Gaussian mixture on the rows of U (n,k) (`clustering.cluster_rows`);
+5. vertex clusters -> face labels by majority vote of the corners (`faces_from_vertex_labels`),
+   the triangles of one polygon kept together (`vote_groups`);
+6. every label split into its edge-connected components, those below ``min_patch_fraction`` of
+   the area merged into the neighbour with the longest shared border, numbered by area (`connected_patches`).
+
+Design notes: docs/design/analysis.md.
 """
 from __future__ import annotations
 
