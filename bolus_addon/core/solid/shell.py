@@ -164,6 +164,50 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     _progress(progress, 0.0, "preparing the region")
     stats: dict = {}
     T0 = time.process_time()
+    _check_size(V, F, t, c, res, others, time_limit_s)
+    skin = SkinDistance(V, F)
+    check_shell_request(t, c, res, skin.area)
+    _check_region(skin)
+    warnings: list[str] = []
+    M = _solid_in_box(skin, V, t, c, res, progress, stats)
+    T1 = time.process_time()
+    holes = skin.loops[1:]
+    M = _cut_holes(skin, M, holes, t, res, progress, warnings)
+    T2 = time.process_time()
+    stats["holes_s"] = T2 - T1
+    _progress(progress, 0.82, "cleaning up")
+    M, Vo, Fo = _cleaned(M, warnings)
+    T3 = time.process_time()
+    stats["clean_s"] = T3 - T2
+    _progress(progress, 0.86, "checks")
+    side = _face_sides(skin, Vo, Fo, t, c, res)
+    T4 = time.process_time()
+    stats["sides_s"] = T4 - T3
+    th, rays, spot = _measure_thickness(skin, M, Vo, Fo, side, t, c, res)
+    stats["thickness_s"] = time.process_time() - T4
+    stats["rays"] = rays
+    tmin, tmean, tmax = _thickness_figures(th, rays, spot, t - c, warnings)
+    topo_warnings = _topology_warnings(skin, M)
+    if _saw_retry and topo_warnings and "more tunnel" in topo_warnings[0]:
+        again = _again_without_teeth(V, F, t, c, res, others, progress, time_limit_s)
+        if again is not None:
+            return again
+    warnings += topo_warnings
+    if others is not None:
+        _progress(progress, 0.95, "collision with the rest of the skin")
+        _check_collision(skin, others, t, c, res, M)
+    stats["total_cpu_s"] = time.process_time() - T0
+    stats["triangles"] = len(Fo)
+    _progress(progress, 1.0, "done")
+    return Shell(V=Vo, F=Fo, side=side, thickness=t, clearance=c, resolution=res, volume_mm3=float(M.volume()),
+                 thickness_min=tmin, thickness_mean=tmean, thickness_max=tmax, holes=len(holes), warnings=warnings,
+                 stats=stats)
+
+
+def _check_size(V, F, t, c, res, others, time_limit_s) -> None:
+    """Refuse, before any work, a region whose grid (its box grown by t + 3 res, voxel res mm)
+    has over MAX_GRID_POINTS points or whose wall t - c mm is estimated to take longer than the
+    time budget (`budget.check_grid_budget`); the message advises a resolution that fits both."""
     pad = t + 3 * res
     grid = _Grid(V.min(axis=0) - pad, V.max(axis=0) + pad, res)
     size = V.max(axis=0) - V.min(axis=0)
@@ -179,14 +223,14 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     check_grid_budget(area, t - c, res, MIN_VOXELS_ACROSS,  # refuse now, not after minutes
                       f"a {t - c:g} mm wall on the region ({size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm, "
                       f"{area / 100:.0f} cm²)", triangles=read, limit=time_limit_s)
-    skin = SkinDistance(V, F)
-    check_shell_request(t, c, res, skin.area)
-    _check_region(skin)
-    warnings: list[str] = []
 
-    # first a box around the skin swept along its normals (the shell lies within it unless a
-    # crease's normal cone reaches farther out): about a third fewer grid points on a face;
-    # if the solid touches that box, again on the full box (the region's box grown by t)
+
+def _solid_in_box(skin, V, t, c, res, progress, stats):
+    """The level-set solid of the field (thickness t, clearance c, voxel res mm), first on a box
+    around the skin swept t along its normals (`_tight_box`: about a third fewer grid points on a
+    face); if the solid comes within a voxel of that box (a crease's normal cone reaching farther
+    out), again on the full box (the region's box grown by t + 3 res; stats["box_retry"])."""
+    pad = t + 3 * res
     lo, hi = _tight_box(skin, t, res)
     for attempt in (0, 1):
         if attempt:
@@ -198,33 +242,41 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
         bb = np.asarray(M.bounding_box()).reshape(2, 3)
         if attempt or (np.all(bb[0] - grid.lo > grid.res) and np.all(grid.hi - bb[1] > grid.res)):
             break
+    return M
 
-    T1 = time.process_time()
-    holes = skin.loops[1:]
-    if holes:
-        _progress(progress, 0.75, f"holes ({len(holes)})")
-        cutters = []
-        for i, loop in enumerate(holes):
-            try:
-                cut, area, perim = _hole_cutter(skin, loop, t + 2 * res, 2 * t + 2 * res, t)
-            except Exception as exc:  # manifold3d refusing a strange loop: keep going, say so
-                warnings.append(f"hole {i + 1} near {_fmt(skin.V[loop].mean(axis=0))} could not be cut through the "
-                                f"bolus ({exc}); it may be closed over")
-                continue
-            if not cut.is_empty():
-                cutters.append(cut)
-            width = 4 * area / perim if perim > 0 else 0.0
-            if width < 2 * res:
-                warnings.append(f"hole {i + 1} near {_fmt(skin.V[loop].mean(axis=0))} is only about {width:.2g} mm "
-                                f"across: it is cut through the bolus as a slit that narrow")
-        if cutters:
-            M = M - m3.Manifold.batch_boolean(cutters, m3.OpType.Add)
-        if str(M.status()).split(".")[-1] != "NoError":
-            raise BolusError(f"cutting the holes through the shell failed (manifold3d: {M.status()})")
 
-    T2 = time.process_time()
-    stats["holes_s"] = T2 - T1
-    _progress(progress, 0.82, "cleaning up")
+def _cut_holes(skin, M, holes, t, res, progress, warnings):
+    """The solid M with a channel cut through it for every hole loop of the region
+    (`_hole_cutter`: the membrane swept from t + 2 res below to 2t + 2 res above the skin).
+    A loop manifold3d refuses, or a hole narrower than 2 res (4 area / perimeter), is warned
+    about; BolusError if the boolean fails."""
+    if not holes:
+        return M
+    _progress(progress, 0.75, f"holes ({len(holes)})")
+    cutters = []
+    for i, loop in enumerate(holes):
+        try:
+            cut, area, perim = _hole_cutter(skin, loop, t + 2 * res, 2 * t + 2 * res, t)
+        except Exception as exc:  # manifold3d refusing a strange loop: keep going, say so
+            warnings.append(f"hole {i + 1} near {_fmt(skin.V[loop].mean(axis=0))} could not be cut through the "
+                            f"bolus ({exc}); it may be closed over")
+            continue
+        if not cut.is_empty():
+            cutters.append(cut)
+        width = 4 * area / perim if perim > 0 else 0.0
+        if width < 2 * res:
+            warnings.append(f"hole {i + 1} near {_fmt(skin.V[loop].mean(axis=0))} is only about {width:.2g} mm "
+                            f"across: it is cut through the bolus as a slit that narrow")
+    if cutters:
+        M = M - m3.Manifold.batch_boolean(cutters, m3.OpType.Add)
+    if str(M.status()).split(".")[-1] != "NoError":
+        raise BolusError(f"cutting the holes through the shell failed (manifold3d: {M.status()})")
+    return M
+
+
+def _cleaned(M, warnings):
+    """`_clean` (crumbs under KEEP_PIECE_FRACTION dropped, arrays read back until stable):
+    (M, Vo (n,3), Fo (m,3)), with warnings for the pieces dropped and for several pieces left."""
     M, Vo, Fo, dropped, pieces = _clean(M)
     if dropped:
         warnings.append(f"{len(dropped)} small piece(s) of {sum(dropped):.3g} mm^3 in total, cut off by the hole "
@@ -232,26 +284,29 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     if pieces > 1:
         warnings.append(f"the shell has {pieces} separate pieces (the region has parts farther apart than the "
                         "thickness)")
+    return M, Vo, Fo
 
-    T3 = time.process_time()
-    stats["clean_s"] = T3 - T2
-    _progress(progress, 0.86, "checks")
-    # the terms at the vertices (half as many as faces), averaged over each face
+
+def _face_sides(skin, Vo, Fo, t, c, res) -> np.ndarray:
+    """SIDE_* (m,) int8 of each face of Fo: the smallest of the field's three terms (sd - c,
+    t - sd, r), taken at the vertices (half as many as faces) and averaged over each face;
+    faces where no term is within res / 4 of 0 (the hole cutters' walls) are SIDE_RIM."""
     a, b, r = (x[Fo].mean(axis=1) for x in skin.terms(Vo, t, c, 3 * res))
     side = np.full(len(Fo), SIDE_RIM, dtype=np.int8)
     side[(a <= b) & (a <= r)] = SIDE_INNER
     side[(b < a) & (b <= r)] = SIDE_OUTER
     side[np.minimum(np.minimum(a, b), r) > 0.25 * res] = SIDE_RIM  # faces of the hole cutters
+    return side
 
-    T4 = time.process_time()
-    stats["sides_s"] = T4 - T3
-    th, rays, spot = _measure_thickness(skin, M, Vo, Fo, side, t, c, res)
-    stats["thickness_s"] = time.process_time() - T4
-    stats["rays"] = rays
+
+def _thickness_figures(th, rays, spot, wall, warnings) -> tuple[float, float, float]:
+    """(min, mean, max) mm of the ray thicknesses th (k,) (NaN when none was measured), with
+    warnings for a wall under 95 % of ``wall`` mm (at ``spot``) and for fewer than 95 % of the
+    rays (`rays`: counts by what they met) reaching the outer face."""
     if len(th):
         tmin, tmean, tmax = float(th.min()), float(th.mean()), float(th.max())
-        if tmin < 0.95 * (t - c):
-            warnings.append(f"the wall is only {tmin:.2f} mm thick near {_fmt(spot)} (thickness {t - c:g} mm asked)")
+        if tmin < 0.95 * wall:
+            warnings.append(f"the wall is only {tmin:.2f} mm thick near {_fmt(spot)} (thickness {wall:g} mm asked)")
     else:
         tmin = tmean = tmax = float("nan")
         warnings.append("the thickness could not be measured: no ray from the inner face reached the outer face")
@@ -261,34 +316,34 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
             f"{rays['skin']} met the skin again across a valley or cavity the bolus fills (e.g. beside the nose), "
             f"{rays['wall']} left through the rim or a hole channel, {rays['none']} found no wall (creases): "
             "min / mean / max count the first kind only")
+    return tmin, tmean, tmax
 
-    topo_warnings = _topology_warnings(skin, M)
-    if _saw_retry and topo_warnings and "more tunnel" in topo_warnings[0]:
-        F2, ears = drop_border_ears(F)
-        if ears:  # a saw-tooth border (whole triangles) left tiny tunnels at the rim: once more without its teeth
-            _progress(progress, 0.5, f"again without the border's {ears} saw teeth")
-            again = make_shell(V, F2, t, c, res, others=others, _saw_retry=False, time_limit_s=time_limit_s,
-                               progress=None if progress is None else (lambda f, text: progress(0.5 + 0.5 * f, text)))
-            size = float(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).max())
-            again.warnings.insert(0, f"the region's border zigzags along whole triangles: its {ears} teeth (triangles "
-                                     f"with two border edges, up to {size:.1f} mm) are left out of the bolus so that "
-                                     "the rim closes without tiny tunnels; Select Treatment Area gives a smooth border")
-            again.stats["border_teeth_dropped"] = ears
-            return again
-    warnings += topo_warnings
-    if others is not None:
-        _progress(progress, 0.95, "collision with the rest of the skin")
-        n, depth, where = _collision(skin, others, t, c, res, M)
-        if n:
-            raise BolusError(
-                f"the shell would run into the rest of the skin near {_fmt(where)} ({n} skin point(s), up to "
-                f"{depth:.1f} mm deep inside the bolus): make the region smaller there or the bolus thinner")
-    stats["total_cpu_s"] = time.process_time() - T0
-    stats["triangles"] = len(Fo)
-    _progress(progress, 1.0, "done")
-    return Shell(V=Vo, F=Fo, side=side, thickness=t, clearance=c, resolution=res, volume_mm3=float(M.volume()),
-                 thickness_min=tmin, thickness_mean=tmean, thickness_max=tmax, holes=len(holes), warnings=warnings,
-                 stats=stats)
+
+def _again_without_teeth(V, F, t, c, res, others, progress, time_limit_s):
+    """The shell made once more without the border's saw teeth (`drop_border_ears`: triangles
+    with two border edges, whose pleated rim wall leaves tiny tunnels), its first warning naming
+    them; None when the border has no teeth."""
+    F2, ears = drop_border_ears(F)
+    if not ears:
+        return None
+    _progress(progress, 0.5, f"again without the border's {ears} saw teeth")
+    again = make_shell(V, F2, t, c, res, others=others, _saw_retry=False, time_limit_s=time_limit_s,
+                       progress=None if progress is None else (lambda f, text: progress(0.5 + 0.5 * f, text)))
+    size = float(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).max())
+    again.warnings.insert(0, f"the region's border zigzags along whole triangles: its {ears} teeth (triangles "
+                             f"with two border edges, up to {size:.1f} mm) are left out of the bolus so that "
+                             "the rim closes without tiny tunnels; Select Treatment Area gives a smooth border")
+    again.stats["border_teeth_dropped"] = ears
+    return again
+
+
+def _check_collision(skin, others, t, c, res, M) -> None:
+    """BolusError naming the spot when skin points of others (V2, F2) lie inside the solid M."""
+    n, depth, where = _collision(skin, others, t, c, res, M)
+    if n:
+        raise BolusError(
+            f"the shell would run into the rest of the skin near {_fmt(where)} ({n} skin point(s), up to "
+            f"{depth:.1f} mm deep inside the bolus): make the region smaller there or the bolus thinner")
 
 
 def _check_region(skin):
