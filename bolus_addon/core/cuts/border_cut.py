@@ -1,36 +1,22 @@
 """One border's smooth cut: the candidate cuts, tried in order, and the rules that accept one (seed 4.1.2).
 
-For a border between patches a and b (`borders.Border`):
+`smooth_border` (a `levelset_cut.CutState`: V mm, F, labels; a `borders.Border` between patches a
+and b) returns the new state and a `BorderReport`.  The first candidate:
 
-1. its vertices P (k,3) in order along it;
-2. a plane Gamma through them.  The seed writes Gamma as p1 x + p2 y + p3 z + 1 = 0 and
-   calls it the *tangent* plane "estimated by nodes in the common boundary".  That form
-   cannot express a plane through the origin, and a plane fitted to the border nodes
-   alone is not unique when they are (nearly) collinear, which is exactly the case of a
-   good border.  We take Gamma through the centroid of P with normal d = the
-   area-weighted mean normal of the faces around the border: the least-squares tangent
-   plane of the surface there, well defined for straight borders too;
+1. the border's vertices P (k,3) in order;
+2. a plane Gamma through the centroid of P, normal d = the area-weighted mean normal of the faces
+   around the border (the least-squares tangent plane there);
 3. P projected on Gamma (eqs. 4-6..4-9) in in-plane axes (`curvefit.plane_axes`);
-4. a least-squares curve l in Gamma (eq. 6-37, `curvefit`): a line or parabola for an
-   open border, an elliptic Fourier curve (order 1: the seed's ellipse) for a closed one;
-5. the surface S through l perpendicular to Gamma, the zero set of phi(p) (the signed
-   offset of p's projection from l), cut into the faces of a band of radius R around
-   the border (`levelset_cut.cut_band`).
+4. a least-squares curve l in Gamma (eq. 6-37, `curvefit`): a line or parabola for an open
+   border, an elliptic Fourier curve (order 1: the seed's ellipse) for a closed one;
+5. the surface through l perpendicular to Gamma, the zero set of phi (the signed offset of a
+   point's projection from l), cut into a band of radius R around the border (`levelset_cut.cut_band`).
 
-Where the projection is not valid (more than STEEP_AREA of the area around the border
-faces more than ~78 degrees away from d), or the fitted curve or the new cut strays more
-than max(3 h, 15 % of the border length) from the border (symmetric Hausdorff distance,
-so a patch that would shrink away is caught too), or the result breaks a rule (the cut
-leaves the band, a patch falls apart or vanishes, a jagged piece of border remains, the
-cut would not turn measurably less than the border (at most 1 - MIN_GAIN of its
-turning) or would move it less than MIN_SHIFT of an edge; a valid cut that still turns
-more than SMOOTH_ENOUGH of the border is kept only if no later one does better), we try
-a planar section (for a loop around a limb, or an arc, the least-squares plane of the
-border; for a nearly straight open border, the plane through its line and the mean
-surface normal), then a *smoothed path along the surface* (`mbo`) over a diffusion
-length of MBO_SIGMA_EDGES mean border edges.  A border that still cannot be smoothed
-is left as it is, and the report says why.  A border whose vertices already lie on the
-curve (or plane section) fitted to them is "already smooth" and left as it is.
+Where that fails (`STEEP_AREA`, `STRAY_EDGES`, `MIN_GAIN`, `MIN_SHIFT`, `SMOOTH_ENOUGH`) a
+planar section is tried, then a smoothed path along the surface (`mbo`, `MBO_SIGMA_EDGES`); a border
+that still cannot be smoothed, or is already smooth (`ON_CURVE`), is left as it is, the report says why.
+
+Design notes: docs/design/cuts.md.
 """
 from __future__ import annotations
 

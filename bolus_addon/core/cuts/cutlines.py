@@ -1,33 +1,22 @@
 """Smooth cut lines between patches (seed 4.1.2, Figure 4-2, Table 4-2; 6.2.4, eq. 6-37).
 
-Spectral clustering leaves patch borders that zig-zag along mesh edges.  For every
-border between two patches A and B, `smooth_cuts` replaces the zig-zag by a smooth
-curve lying on the surface and re-triangulates the faces it crosses.  One idea per module:
+`smooth_cuts` (V (n,3) mm, F (m,3), labels (m,)) replaces every zig-zag border between two patches by
+a smooth curve on the surface, re-triangulating the faces it crosses (`SmoothCutResult`).  Modules:
 
 - `borders`: the borders between two patches, ordered, their turning per mm;
-- `curvefit`: the least-squares plane curves (line, parabola, elliptic Fourier; eqs.
-  4-6..4-9, 6-37) and the signed distance to them;
+- `curvefit`: the least-squares plane curves (eqs. 4-6..4-9, 6-37) and the signed distance to them;
 - `mbo`: the smoothed path along the surface (the diffused patch indicator);
-- `levelset_cut`: cutting the triangles along a level set phi = 0 (Figure 4-2 (b)),
-  snapping, relabelling and the rules a cut must keep;
+- `levelset_cut`: cutting the triangles along a level set phi = 0 (Figure 4-2 (b)), snapping,
+  relabelling and the rules a cut must keep;
 - `border_cut`: one border's candidate cuts, tried in order, and which is accepted;
-- this module: the passes over all borders, the per-border report rows, and the
-  checks of a region before cutting.
+- this module: the passes over all borders (up to `MAX_PASSES`, until one changes nothing), the
+  report rows, and the checks of a region before cutting (`cut_region_check`).
 
-Idempotent: a border is "already smooth", and left as it is, when its
-vertices lie within a tenth of its mean edge of the curve (or plane section across the
-surface) fitted to them, or when the cuts we can make are valid but not measurably
-smoother.  A cut of a|c relabels faces near an a|b|c junction and so moves the end of
-an a|b cut made before it; `smooth_cuts` therefore passes over all borders again (up to
-MAX_PASSES; a border is tried again only if one of its two patches changed since)
-until a pass changes nothing.  Running it on its own result then changes nothing
-either: same V, F and labels, every border 'unchanged'.  The report rows give each
-input border's turning before, and after on the whole final border (its ends included).
+Idempotent: run on its own result it changes nothing.  Input vertices keep their indices, new
+ones are appended; ``vert_src`` / ``vert_weights`` (barycentric weights on an original triangle)
+and ``face_parent`` let a caller interpolate any attribute onto the new geometry.
 
-Vertices of the input keep their indices; new vertices are appended.  Each vertex
-carries its barycentric weights on an original triangle (``vert_src``,
-``vert_weights``) and each face its original triangle (``face_parent``), so a caller
-can interpolate any attribute onto the new geometry.
+Design notes: docs/design/cuts.md.
 """
 from __future__ import annotations
 

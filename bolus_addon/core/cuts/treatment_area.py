@@ -1,28 +1,21 @@
 """The treatment area around a point: `treatment_area` (SPEC `select_area`).
 
-1. The surface point p nearest to the given centre (the 3D cursor), exactly
-   (`geodesic.closest_point_on_mesh`); refused when the centre is farther from the
-   surface than ``max_cursor_mm`` (default: the radius).
-2. d, the distance along the surface from p (`geodesic.geodesic_distance`: unfolding
-   front propagation, exact on flat meshes, within 0.03 mm at 50 mm on a 100 mm sphere).
-3. The border: the level line d = radius, cut through the faces with
-   `levelset_cut.cut_band` (d linear along the edges; a new vertex on every crossed
-   edge, where d = radius, so on the surface; cut points within 5 % of an edge's end
-   snap onto that vertex, no slivers).  Outside the faces it crosses nothing changes.
-4. Cavities (``exclude_cavities``): faces of the area whose openness (`visibility`:
-   the cosine-weighted part of the sky above a face that it can see, over 96 view
-   directions, with every face within 1.5 radius along the surface as a possible
-   occluder) is below ``openness_threshold`` (0.2) are left out.  The openness of the
-   faces is averaged onto the vertices and the area is cut a second time along its
-   level line openness = threshold, so a cavity's border is a smooth curve too; a
-   cavity inside the area becomes a hole of it.  "Outside" is the side of the surface
-   that is more open overall (the winding does not matter).
-5. The selected area: the faces inside both cuts that are edge-connected to p.
+For V (n,3) mm, F (m,3), a centre (3,) mm and a radius (mm):
 
-The result keeps the map back to the input (as `levelset_cut.CutState`): the parent
-triangle of each face and barycentric weights of each vertex, so a writer can
-interpolate every attribute (`mesh_cuts.apply_cuts` reads the same field names as a
-`cutlines.SmoothCutResult`).
+1. p, the surface point nearest to the centre (`geodesic.closest_point_on_mesh`); refused when the
+   centre is farther from the surface than ``max_cursor_mm`` (default: the radius);
+2. d, the distance along the surface from p (`geodesic.geodesic_distance`);
+3. the border: the level line d = radius, cut through the faces (`levelset_cut.cut_band`);
+4. cavities (``exclude_cavities``): faces whose openness (`visibility`) is below
+   ``openness_threshold`` (`OPENNESS_THRESHOLD`) are left out, the area cut a second time along
+   the level line openness = threshold (`cavity_faces`);
+5. the selected area: the faces inside both cuts that are edge-connected to p.
+
+The `Area` keeps the map back to the input (as `levelset_cut.CutState`): the parent triangle of
+each face and barycentric weights of each vertex, so a writer can interpolate every attribute
+(`mesh_cuts.apply_cuts` reads the same field names as a `cutlines.SmoothCutResult`).
+
+Design notes: docs/design/cuts.md.
 """
 from __future__ import annotations
 
