@@ -1,36 +1,22 @@
 """Improve flattenability by moving the surface outward (seed 4.3-4.4, eqs. 4-10..4-21).
 
-`ImproveJob` / `improve_flattenability` move the interior vertices of a region along
-their outward normals by air gaps 0 <= d <= max_gap_mm so that the surface becomes easier
-to flatten (J of eq. 4-21, `improve_objective.SurfaceObjective`), patch by patch:
+`ImproveJob` / `improve_flattenability` (V (n,3) mm, F (m,3)) move the interior vertices of a region
+along their outward normals by air gaps 0 <= d <= max_gap_mm so that the surface becomes easier to
+flatten (J of eq. 4-21, `objective.SurfaceObjective`), and return an `Improvement` (V_out = V + N d):
 
-* **What is optimised.** Scanned skin carries millimetre noise that dominates the raw
-  angle sums (a scanned nose: sum varpi ~ 36 raw, ~ 8 on the seed's smooth model).  The
-  objective is therefore evaluated on the *analysis copy* of the region, the skin smoothed
-  at ``smoothing_mm`` exactly as the flattenability preview and the segmentation do
-  (`saliency.smooth_for_analysis`; 0 = the raw mesh).  Each vertex moves along the unit
-  normal (eq. 3-2) of the analysis copy at that vertex, taken once before any move (its
-  "own original normal"; noise-free, and the mesh's own vertex normal when smoothing is
-  0).  The offsets found are applied to the skin itself: V_out = V + N d, so the air gap of
-  a vertex (the seed's "distance between new and original positions") is d.  The
-  smoothness term (4-13) is measured on that output, V + N d, not on the analysis copy:
-  the copy hides millimetre roughness in d, and with smoothness measured there the unfolded
-  pattern of the output got worse on 2 of 7 bench cases (EL x1.03 and x1.21); measured on the
-  output it was no worse on any (EL x0.83-1.00, bench/flatten_bench.py).
-* **Patches.** With patch labels (`bolus_patch`) every patch is optimised on its own with
-  its border fixed (seed Table 4-4), so the borders two patches share never move and stay
-  consistent; faces labelled -1 (outside a segmented region) are left alone.
-* **Methods.** ``GRADIENT``: projected L-BFGS-B (scipy) on the offsets of the movable
-  vertices within [0, max_gap], on J with |x| smoothed (`value_and_grad`), restarted in
-  short chunks so a modal operator can step it and cancel.  ``LPSO``: the seed's local node
-  selection + particle swarm (Algorithms 4-1, 4-2; `lpso.lpso_steps`).  The benchmark
-  (bench/flatten_bench.py) decides the default.
-* **Measured as the preview measures.** Before / after figures (Table 4-4: sum varpi, FLV,
-  largest varpi, smoothness, area, gaps) are taken on the analysis copy of the input and of
-  the output, each patch as a mesh of its own (as `spectral.patch_stats`); the raw sum
-  varpi is given beside.  FLV never decreases: a patch whose result would raise its sum
-  varpi as measured that way is scaled back (halved up to three times) or left unchanged
-  ("no gain").
+* J's angle and area terms are evaluated on the analysis copy of the region (the skin smoothed at
+  ``smoothing_mm``, `saliency.smooth_for_analysis`; 0 = the raw mesh), N its unit normals (eq. 3-2)
+  taken once before any move; the smoothness term (4-13) on the output V + N d;
+* with patch labels every patch is optimised on its own with its border fixed (seed Table 4-4);
+  faces labelled -1 are left alone;
+* ``GRADIENT`` (`DEFAULT_METHOD`): projected L-BFGS-B on J with |x| smoothed (`gradient_steps`),
+  restarted in short chunks so a modal operator can step and cancel it; ``LPSO``: local node
+  selection + particle swarm (Algorithms 4-1, 4-2; `lpso.lpso_steps`);
+* before / after figures (Table 4-4: sum varpi, FLV, largest varpi, smoothness, area, gaps) on the
+  analysis copies of input and output, each patch a mesh of its own (`surface_stats`); FLV never
+  decreases: a patch whose sum varpi would rise is scaled back or left unchanged ("no gain").
+
+Design notes: docs/design/improve.md.
 """
 from __future__ import annotations
 

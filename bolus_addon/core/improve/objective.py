@@ -1,29 +1,22 @@
 """The objective J(X) of the surface improvement (seed 4.3.1, eqs. 4-10..4-21).
 
-Every vertex p may only move along one fixed unit direction N_p (its outward normal,
-eq. 3-2, taken once on the surface before any move) by a distance d_p >= 0; the
-coordinate change of eqs. 4-18..4-20 (a rotation that makes N_p the local z axis) turns
-the seed's constraint v'_pz - v'0_pz > 0 into exactly that.  The surface is
-
-    X(d) = X0 + N * d[:, None]                     X0, N (n,3), d (n,) in mm
-
-and, over the interior vertices V_in (boundary vertices never move, eq. 4-17):
+Every vertex p moves only along one fixed unit direction N_p (its outward normal, eq. 3-2,
+taken once before any move; eqs. 4-18..4-20) by d_p >= 0 mm; boundary vertices never move
+(eq. 4-17).  With X(d) = X0 + N * d[:, None] (X0, N (n,3), d (n,) mm), over the interior V_in:
 
     J(d) = mu1 * sum_{V_in} |theta_p - 2 pi|           (4-10, theta of eq. 4-1)
          + mu2 * sum_{V_in} ||(L X)_p||^2              (4-13, L the uniform Laplacian 4-11, 4-12)
          + mu3 * sum_p ||x_p - x0_p||^2 = mu3 sum d^2   (4-16)
          + mu4 * sum_f |A_f - A0_f| / sum_f A0_f         (4-14)               (eq. 4-21)
 
-with mu = (10, 1, 0.1, 10), the seed's values "for all examples".  Units are mm (the
-seed's tables are in mm too), so the magnitudes the seed balanced stay balanced.
+with mu = `MU_DEFAULT` = (10, 1, 0.1, 10), the seed's values, in mm.  `SurfaceObjective` evaluates it:
 
-Three ways to evaluate it:
-  * `value` / `terms`: the exact J of one offset vector;
-  * `value_and_grad`: J with |x| replaced by the smooth sqrt(x^2 + s^2) - s (s small) and
-    its exact gradient with respect to d, for gradient methods (projected L-BFGS-B);
-  * `batch_values`: the exact J of P candidates that differ from a base vector d only at
-    k given vertices, incremental (only the one-rings of those vertices are evaluated
-    again) and vectorised over the P candidates: what a particle swarm needs.
+  * `value` / `terms`: the exact J of one offset vector (terms: the four summands);
+  * `value_and_grad`: J with |x| smoothed to sqrt(x^2 + s^2) - s and its exact gradient in d;
+  * `batch_values`: the exact J of P candidates (P,k) that differ from a base d only at k given
+    vertices, incrementally (only their one-rings) and vectorised over the candidates.
+
+Design notes: docs/design/improve.md.
 """
 from __future__ import annotations
 
