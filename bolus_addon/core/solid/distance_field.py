@@ -100,11 +100,22 @@ class SkinDistance:
     def __init__(self, V, F, sub_radius: float = 1.0):
         self.V = V
         self.F = F
-        topo = MeshTopology(V, F)
-        self.topo = topo
-        A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-        self.A, self.B, self.C = A, B, C
-        fn = np.cross(B - A, C - A)
+        self.topo = MeshTopology(V, F)
+        self.A, self.B, self.C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+        fn = self._normals()
+        self.vtree = cKDTree(V)
+        self._pseudo_normals()
+        self._border()
+        self._order_loops(fn.sum(axis=0))
+        self._rim_samples()
+        self._triangle_trees(sub_radius)
+        self.kd_eps = 0.0
+
+    def _normals(self) -> np.ndarray:
+        """Sets area (mm^2), fn (m,3) unit face normals and vn (n,3) unit area-weighted vertex
+        normals; returns the unnormalised face normals (m,3) (length: twice the area)."""
+        V, F, A = self.V, self.F, self.A
+        fn = np.cross(self.B - A, self.C - A)
         dbl = np.linalg.norm(fn, axis=1)
         self.area = float(0.5 * dbl.sum())
         self.fn = fn / dbl[:, None]
@@ -114,9 +125,13 @@ class SkinDistance:
         ln = np.linalg.norm(vn, axis=1)
         ln[ln == 0] = 1.0
         self.vn = vn / ln[:, None]
-        self.vtree = cKDTree(V)
-        # pseudo-normals for the sign (Baerentzen & Aanaes 2005): face normal inside a face, the
-        # sum of the two face normals on an edge, the angle-weighted normal at a vertex
+        return fn
+
+    def _pseudo_normals(self) -> None:
+        """Pseudo-normals for the sign (Baerentzen & Aanaes 2005): the face normal inside a face,
+        the sum of the two face normals on an edge (edge_pn (m,3,3): edge opposite corner j), the
+        angle-weighted normal at a vertex (vn_angle (n,3))."""
+        V, F, topo = self.V, self.F, self.topo
         ang = corner_angles(V, F)
         van = np.zeros_like(V)
         for j in range(3):
@@ -126,22 +141,34 @@ class SkinDistance:
         other = np.where(ef[:, :, 0] == np.arange(len(F))[:, None], ef[:, :, 1], ef[:, :, 0])  # (m,3), -1 on border
         en = self.fn[:, None, :] + np.where(other[:, :, None] >= 0, self.fn[np.maximum(other, 0)], 0.0)
         self.edge_pn = np.stack([en[:, 1], en[:, 2], en[:, 0]], axis=1)  # (m,3,3): edge opposite corner j
-        # border: per-face flag of the edge opposite corner j, per-vertex flag
+
+    def _border(self) -> None:
+        """Border flags: fborder (m,3) of the edge opposite corner j, vborder (n,) per vertex, and
+        border_edges (b,2) vertex pairs."""
+        topo = self.topo
         be = topo.boundary_edges[topo.face_edges]  # (m,3): edge F[j] -> F[j+1]
         self.fborder = np.stack([be[:, 1], be[:, 2], be[:, 0]], axis=1)  # opposite corner j
         self.vborder = topo.boundary_vertices
         self.border_edges = topo.edges[topo.boundary_edges]
-        loops = boundary_loops(F, topo)
+
+    def _order_loops(self, mean_n) -> None:
+        """loops, loop_lengths (mm), loop_areas (mm^2): the border loops, outer one first.  The
+        outer loop encloses the most area seen along the region's mean normal mean_n (3,) (the
+        longest loop is not it where a border zigzags along whole faces: a dome's cut top)."""
+        V = self.V
+        loops = boundary_loops(self.F, self.topo)
         lengths = [float(np.linalg.norm(V[lp] - V[np.roll(lp, -1)], axis=1).sum()) for lp in loops]
-        # the outer loop encloses the most area seen along the region's mean normal (the
-        # longest loop is not it where a border zigzags along whole faces: a dome's cut top)
-        mean_n = fn.sum(axis=0)
         mean_n = mean_n / max(float(np.linalg.norm(mean_n)), 1e-300)
         enclosed = [abs(float(np.cross(V[lp], V[np.roll(lp, -1)]).sum(axis=0) @ mean_n)) / 2 for lp in loops]
         order = sorted(range(len(loops)), key=lambda i: (enclosed[i], lengths[i]), reverse=True)
         self.loops = [loops[i] for i in order]
         self.loop_lengths = [lengths[i] for i in order]
         self.loop_areas = [enclosed[i] for i in order]
+
+    def _rim_samples(self) -> None:
+        """rim_pts (s,3): the border edges sampled every 0.05 mm (one far point when the region
+        has no border), and their KD-tree rim_tree."""
+        V = self.V
         if len(self.border_edges):
             P, Q = V[self.border_edges[:, 0]], V[self.border_edges[:, 1]]
             n = np.maximum(2, np.ceil(np.linalg.norm(Q - P, axis=1) / 0.05).astype(int) + 1)
@@ -151,11 +178,15 @@ class SkinDistance:
         else:
             self.rim_pts = np.full((1, 3), 1e12)
         self.rim_tree = cKDTree(self.rim_pts)
-        # KD-tree of sub-triangle centres: triangle split into k^2 pieces of radius <= sub_radius
+
+    def _triangle_trees(self, sub_radius: float) -> None:
+        """KD-trees of the triangle centres (cent_tree: fast band tests far from the skin, where a
+        tree of a dense sheet is slow to query) and of sub-triangle centres (tree over sub_pts
+        (s,3), owner triangle sub_owner (s,)): each triangle split regularly into k^2 pieces of
+        radius <= sub_radius mm.  tri_rmax, rmax: the largest triangle and piece radius (mm)."""
+        A, B, C = self.A, self.B, self.C
         cent = (A + B + C) / 3.0
         rad = np.max(np.linalg.norm(np.stack([A, B, C]) - cent[None], axis=2), axis=0)
-        # coarse tree of the triangle centres: fast band tests far from the skin (a KD-tree of
-        # a dense sheet is slow to query from afar)
         self.cent = cent
         self.cent_tree = cKDTree(cent)
         self.tri_rmax = float(rad.max())
@@ -180,7 +211,6 @@ class SkinDistance:
         self.sub_owner = np.concatenate(owner)
         self.rmax = float(np.concatenate(radii).max())
         self.tree = cKDTree(self.sub_pts, leafsize=32, balanced_tree=False, compact_nodes=False)
-        self.kd_eps = 0.0
 
     # ------------------------------------------------------------------ nearest
     def _best_of(self, X, cand, skip=None):
