@@ -1,28 +1,22 @@
 """The operators' common base `BolusOperator`: poll, error guard, progress, the region.
 
-The operators `bpy.ops.bolus.*` (SPEC; docs/operators.md) live in one module of operators/
-per stage.  Each operator is thin: read the region (mesh_region), call the core, write the
-results, report.  Everything is computed before the mesh is touched, so an error leaves the
-mesh exactly as it was; `BolusError` becomes `self.report({'ERROR'}, ...)` and
-``{'CANCELLED'}``, and an unexpected exception is reported the same way (with the
-traceback on the console) instead of reaching the user.
+Each operator `bpy.ops.bolus.*` (docs/operators.md; one module of operators/ per stage) reads the
+region (mesh_region), calls the core, writes the results and reports.  Everything is computed
+before the mesh is touched, so an error leaves the mesh as it was; a `BolusError`, or any other
+exception (its traceback on the console), becomes ``self.report({'ERROR'}, ...)`` and
+``{'CANCELLED'}``.  Long operators split their work in three:
 
-Long operators (saliency_preview, segment, smooth_cuts, select_area, make_shell,
-print_segment, orient_parts, unfold, build_library, retrieve) split their work in three:
+- ``prepare(context) -> job`` (main thread): read the region, copy the operator's settings into
+  the job, validate (`BolusError` refuses); or a result set such as ``{'FINISHED'}`` when there is
+  nothing to compute;
+- ``compute(job, progress) -> result`` (a staticmethod that sees neither the operator nor bpy):
+  core calls only, reporting ``progress(fraction, text)``; it may run in a worker thread;
+- ``finish(context, job, result) -> {'FINISHED'}`` (main thread): write objects, attributes, report.
 
-- ``prepare(context) -> job`` (main thread): read the region, copy the operator's
-  settings into the job, validate (`BolusError` refuses).  It may instead return a
-  result set such as ``{'FINISHED'}`` when there is nothing to compute.
-- ``compute(job, progress) -> result`` (a staticmethod: it cannot see the operator or
-  bpy): only core calls, reporting ``progress(fraction, text)``; it may run in a worker
-  thread.
-- ``finish(context, job, result) -> {'FINISHED'}`` (main thread): write objects and
-  attributes, report.
+``execute`` runs the three in the main thread (progress lines on stdout in background runs);
+``invoke`` from the sidebar runs `compute` in a worker thread (`modal_run`).
 
-``execute`` (scripts, redo, ``blender --background``) runs the three in the main thread,
-with progress lines on stdout in background runs; ``invoke`` from the sidebar runs
-`compute` in a worker thread (`modal_run`).  improve_flattenability keeps its own step
-job (one job step per 10 ms tick; Esc there keeps the best surface so far).
+Design notes: docs/design/blender.md.
 """
 from __future__ import annotations
 
