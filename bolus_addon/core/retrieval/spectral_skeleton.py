@@ -348,19 +348,8 @@ def skeleton(embedding, graph, clusters=DEFAULT_CLUSTERS, rng=0) -> Skeleton:
 
     clusters: the number of GMM clusters (int >= 1) or 'auto' (BIC over ``AUTO_CLUSTERS``).  Deterministic for
     a fixed ``rng``."""
-    E = np.asarray(embedding, dtype=np.float64)
-    if E.ndim != 2 or E.shape[0] < 2 or E.shape[1] < 1 or not np.isfinite(E).all():
-        raise BolusError(f"the feature space must be a finite (n, d) array with n >= 2, got shape {E.shape}")
+    E = _checked_embedding(embedding, graph, clusters)
     n = len(E)
-    if not sp.issparse(graph) or graph.shape != (n, n):
-        raise BolusError(f"the graph must be a sparse ({n}, {n}) matrix, one row per embedding row")
-    if clusters != "auto":
-        try:
-            ok = int(clusters) == clusters and int(clusters) >= 1
-        except (TypeError, ValueError):
-            ok = False
-        if not ok:
-            raise BolusError(f"clusters must be a whole number >= 1 or 'auto', got {clusters!r}")
     rng = as_rng(rng)
     X = E - E.mean(axis=0)
     rms = float(np.sqrt((X**2).sum(axis=1).mean()))
@@ -369,56 +358,14 @@ def skeleton(embedding, graph, clusters=DEFAULT_CLUSTERS, rng=0) -> Skeleton:
         return Skeleton(E[[v0]].copy(), np.zeros((0, 2), np.int64), 0, ("centre",), np.array([v0]),
                         np.zeros(n, np.int64))
     X = X / rms
-    # the graph, lengths measured in the feature space, linked when in pieces
-    G = sp.csr_matrix(graph)
-    G = sp.csr_matrix((np.ones(G.nnz), G.indices.copy(), G.indptr.copy()), shape=(n, n))
-    G = (G + G.T).tocoo()
-    lengths = np.linalg.norm(X[G.row] - X[G.col], axis=1)
-    D = link_components(X, _symmetric(G.row, G.col, np.maximum(lengths, 1e-12), n))
-    A = sp.csr_matrix((np.ones(D.nnz), D.indices, D.indptr), shape=(n, n))
+    D, A = _feature_graph(X, graph)
     r = np.linalg.norm(X - X[v0], axis=1)
-    # step 1: GMM clusters; step 2: clusters holding several branches divided by a GMM
-    with threadpool_limits(1):  # 3x3 covariances: threads only wait on each other
-        labels = _gmm(X, clusters, rng)
-    sets = []
-    for c in range(int(labels.max()) + 1):
-        members = np.flatnonzero(labels == c)
-        pieces = _branch_pieces(members, r, A)
-        if len(pieces) > 1:
-            means = np.array([X[p].mean(axis=0) for p in pieces])
-            with threadpool_limits(1):
-                sub = _gmm(X[members], len(pieces), rng, means_init=means)
-            sets.extend(members[sub == s] for s in range(int(sub.max()) + 1))
-        else:
-            sets.append(members)
+    sets = _branch_sets(X, r, A, clusters, rng)
     set_labels = np.empty(n, np.int64)
     for s, members in enumerate(sets):
         set_labels[members] = s
-    # feature points: the farthest vertex of each set; an end (tip) or a point along a branch
-    rmax = float(r.max())
-    feature, ends = [], []
-    for members in sets:
-        f = int(members[np.argmax(r[members])])
-        if f == v0 or f in feature:
-            continue
-        feature.append(f)
-        if not (r[_ring(A, f)] > r[f]).any() and r[f] >= END_MIN_RADIUS * rmax:
-            ends.append(f)
-    # step 3: connection along one shortest-path tree from v0 to the ends
-    _, pred = dijkstra(D, directed=False, indices=v0, return_predecessors=True)
-    path_of = {e: _tree_path(pred, e, v0) for e in ends}
-    on_tree = np.zeros(n, bool)
-    children = np.zeros(n, np.int64)
-    on_tree[v0] = True
-    for e in ends:
-        for child, p in zip(path_of[e][:-1], path_of[e][1:]):
-            if not on_tree[child]:
-                on_tree[child] = True
-                children[p] += 1
-    kind = {v0: "centre"}
-    kind.update((e, "end") for e in ends)
-    for v in np.flatnonzero(children >= 2):
-        kind.setdefault(int(v), "rendezvous")
+    feature, ends = _feature_points(sets, r, A, v0)
+    pred, path_of, kind = _connection(D, v0, ends)
     # the other feature points: uphill to the end of their branch, marked where that branch's path passes nearest
     for f in feature:
         if f in kind:
@@ -433,6 +380,96 @@ def skeleton(embedding, graph, clusters=DEFAULT_CLUSTERS, rng=0) -> Skeleton:
     verts = np.array(keep, dtype=np.int64)
     return Skeleton(E[verts].copy(), np.array(edges, dtype=np.int64).reshape(-1, 2), 0,
                     tuple(kind[v] for v in keep), verts, set_labels)
+
+
+def _checked_embedding(embedding, graph, clusters) -> np.ndarray:
+    """The embedding as a finite float (n,d) array, n >= 2, after checking that graph is a sparse
+    (n,n) matrix and clusters a whole number >= 1 or 'auto' (BolusError otherwise)."""
+    E = np.asarray(embedding, dtype=np.float64)
+    if E.ndim != 2 or E.shape[0] < 2 or E.shape[1] < 1 or not np.isfinite(E).all():
+        raise BolusError(f"the feature space must be a finite (n, d) array with n >= 2, got shape {E.shape}")
+    n = len(E)
+    if not sp.issparse(graph) or graph.shape != (n, n):
+        raise BolusError(f"the graph must be a sparse ({n}, {n}) matrix, one row per embedding row")
+    if clusters != "auto":
+        try:
+            ok = int(clusters) == clusters and int(clusters) >= 1
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise BolusError(f"clusters must be a whole number >= 1 or 'auto', got {clusters!r}")
+    return E
+
+
+def _feature_graph(X: np.ndarray, graph) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """The graph's edges (symmetrised) with lengths measured in the normalised feature space X (n,d),
+    its pieces joined by `link_components`: (D (n,n) edge lengths, A (n,n) its 0/1 pattern)."""
+    n = len(X)
+    G = sp.csr_matrix(graph)
+    G = sp.csr_matrix((np.ones(G.nnz), G.indices.copy(), G.indptr.copy()), shape=(n, n))
+    G = (G + G.T).tocoo()
+    lengths = np.linalg.norm(X[G.row] - X[G.col], axis=1)
+    D = link_components(X, _symmetric(G.row, G.col, np.maximum(lengths, 1e-12), n))
+    A = sp.csr_matrix((np.ones(D.nnz), D.indices, D.indptr), shape=(n, n))
+    return D, A
+
+
+def _branch_sets(X: np.ndarray, r: np.ndarray, A: sp.csr_matrix, clusters, rng) -> list[np.ndarray]:
+    """Steps 1-2 of 5.2.2: GMM clusters of the rows of X (n,d), each cluster holding several
+    branches (`_branch_pieces` of its outer half, r (n,) the distance from v0) divided by a GMM
+    started at the pieces' means.  Returns the sets' vertex indices."""
+    with threadpool_limits(1):  # 3x3 covariances: threads only wait on each other
+        labels = _gmm(X, clusters, rng)
+    sets = []
+    for c in range(int(labels.max()) + 1):
+        members = np.flatnonzero(labels == c)
+        pieces = _branch_pieces(members, r, A)
+        if len(pieces) > 1:
+            means = np.array([X[p].mean(axis=0) for p in pieces])
+            with threadpool_limits(1):
+                sub = _gmm(X[members], len(pieces), rng, means_init=means)
+            sets.extend(members[sub == s] for s in range(int(sub.max()) + 1))
+        else:
+            sets.append(members)
+    return sets
+
+
+def _feature_points(sets, r: np.ndarray, A: sp.csr_matrix, v0: int) -> tuple[list, list]:
+    """The farthest vertex from v0 of each set (v0 and repeats left out), and those of them that
+    are ends: no graph neighbour farther from v0 and r >= END_MIN_RADIUS of the largest r.
+    Returns (feature points, ends), vertex indices."""
+    rmax = float(r.max())
+    feature, ends = [], []
+    for members in sets:
+        f = int(members[np.argmax(r[members])])
+        if f == v0 or f in feature:
+            continue
+        feature.append(f)
+        if not (r[_ring(A, f)] > r[f]).any() and r[f] >= END_MIN_RADIUS * rmax:
+            ends.append(f)
+    return feature, ends
+
+
+def _connection(D: sp.csr_matrix, v0: int, ends: list) -> tuple[np.ndarray, dict, dict]:
+    """Step 3 of 5.2.2: one shortest-path tree from v0 over the edge lengths D (n,n), the path of
+    each end to v0, and the kinds of the tree's nodes: v0 'centre', the ends 'end', vertices where
+    two paths part 'rendezvous'.  Returns (predecessors (n,), {end: path (end first)}, {vertex: kind})."""
+    n = D.shape[0]
+    _, pred = dijkstra(D, directed=False, indices=v0, return_predecessors=True)
+    path_of = {e: _tree_path(pred, e, v0) for e in ends}
+    on_tree = np.zeros(n, bool)
+    children = np.zeros(n, np.int64)
+    on_tree[v0] = True
+    for e in ends:
+        for child, p in zip(path_of[e][:-1], path_of[e][1:]):
+            if not on_tree[child]:
+                on_tree[child] = True
+                children[p] += 1
+    kind = {v0: "centre"}
+    kind.update((e, "end") for e in ends)
+    for v in np.flatnonzero(children >= 2):
+        kind.setdefault(int(v), "rendezvous")
+    return pred, path_of, kind
 
 
 def model_skeleton(V, F, clusters=DEFAULT_CLUSTERS, k: int = FEATURE_DIMENSIONS, rng=0) -> Skeleton:
