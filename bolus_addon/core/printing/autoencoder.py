@@ -2,37 +2,21 @@
 
 One auto-encoder G(X) ~ X (eq. 3-15) with encoder W1 (h,d), b1 (h,) and decoder W2 (d,h), b2 (d,):
 
-* code h = g1(W1 x + b1) (eq. 3-16), output y = g2(W2 h + b2) (eqs. 3-17, 3-18); rows of X are
-  samples, so in code H = g1(X W1^T + b1) (N,h) and Y = g2(H W2^T + b2) (N,d);
+* code h = g1(W1 x + b1) (eq. 3-16), output y = g2(W2 h + b2) (eqs. 3-17, 3-18), g1 = g2 = the
+  logistic sigmoid; rows of X are samples, so in code H = g1(X W1^T + b1) (N,h) and
+  Y = g2(H W2^T + b2) (N,d);
 * cost C = 1/(2N) sum_n ||y_n - x_n||^2 + lam (sum W1^2 + sum W2^2) (eq. 3-19);
 * sparse cost C_s = C + beta sum_i KL(rho || rho_hat_i) (eqs. 3-20, 3-21), rho_hat_i the mean
   activation of hidden unit i over the N samples;
-* a stack (Algorithm 6-1) is trained greedily: layer 1 on X with C_s (line 2), layer k+1 on the codes
-  of layer k with the plain C (lines 7 and 12); the last layer's codes are the hidden features pf of
-  eq. 3-14.  The seed's sizes: 90 -> 120 -> 50 -> 20, lam 0.004, rho 0.05, beta 5.
-
-Where the seed is vague, the choices made here:
-
-* g1 = g2 = the logistic sigmoid (the seed names no function; the sigmoid keeps codes in (0,1), which
-  the KL term needs, and the inputs are features scaled to [0,1]);
-* the reconstruction error of eq. 3-19 is averaged over the samples (1/(2N) sum), so lam and beta
-  weigh the same for any number of rows;
-* the weight decay D(theta) is sum of the squared weights W1, W2 only, not the biases: the seed's
-  theta = {W, b} is ambiguous, and a decay on b1 fights the sparsity target (rho = 0.05 needs
-  strongly negative hidden biases); no factor 1/2 (D as written in the seed);
-* sparsity only on layer 1, as Algorithm 6-1 (C_2, C_3 without the KL term);
-* weights start uniform in +-sqrt(6/(d+h+1)), biases at zero; minimised by L-BFGS-B with the exact
-  analytic gradient (the seed used MATLAB; its iteration counts 1319, 413, 237 are not copied).
-
-* input scaling (``train_stacked(scale_inputs=True)``, the default): every layer's input columns are
-  rescaled to [0, 1] over the training rows, (x - lo) / span, and lo, span are stored with the weights
-  and applied by `StackedAutoEncoder.encode`.  This is what MATLAB's trainAutoencoder (the seed's tool)
-  does by default ('ScaleData').  Measured without it: the codes of the sparse layer 1 (mean 0.05,
-  spread 0.07) vary too little for layers 2 and 3 to pay the seed's weight decay lam = 0.004; they
-  collapse to W = 0, constant codes (`info["code_std"]` ~ 0), and pf is the same for every row.  With
-  the scaling every layer keeps lam = 0.004 and its codes vary.  (``lam`` may also be given per layer.)
+* a stack (Algorithm 6-1) is trained greedily: layer 1 on X with C_s (line 2), layer k+1 on the
+  codes of layer k with the plain C (lines 7 and 12); the last layer's codes are the hidden
+  features pf of eq. 3-14.  The seed's sizes: 90 -> 120 -> 50 -> 20, lam 0.004, rho 0.05, beta 5;
+* each layer minimised by L-BFGS-B with the analytic gradient, its inputs scaled to [0, 1] over
+  the training rows (``scale_inputs``; lo and span kept for `StackedAutoEncoder.encode`).
 
 Every array is float64.  Bad input raises `BolusError`; randomness comes from `rng`.
+
+Design notes: docs/design/printing.md.
 """
 from __future__ import annotations
 

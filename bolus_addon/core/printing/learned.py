@@ -1,43 +1,22 @@
 """Print segmentation from learned features (seed 6.4, Algorithm 6-2; eqs. 3-9..3-14).
 
-Pipeline of `learned_segmentation`:
+`learned_segmentation` splits a mesh V (n,3) mm, F (m,3) into print parts (labels (m,)):
 
 1. printing features (Q', U', K') per triangle at the whole mesh's best build direction
-   (subgraphs.print_features, eqs. 6-6, 6-13, 6-20) and the sub-graphs of 30 triangles
-   (subgraphs.build_subgraphs, 6.4.1), one 90-vector each;
+   (`subgraphs.print_features`, eqs. 6-6, 6-13, 6-20) and the sub-graphs of 30 triangles
+   (`subgraphs.build_subgraphs`, 6.4.1), one 90-vector each;
 2. hidden features pf (N, 20) of every sub-graph from the stacked auto-encoder
-   (autoencoder.py, trained weights in ``assets/print_sae.npz``, Algorithm 6-1);
-3. the similarity of eq. 3-14 between sub-graphs (`similarity`);
+   (`autoencoder`, trained weights in ``assets/print_sae.npz``, Algorithm 6-1);
+3. the similarity of eq. 3-14 between sub-graphs (`similarity`): a Gaussian kernel on the
+   central triangles' distance plus one on the hidden features' distance;
 4. affinity propagation (eqs. 3-9..3-13, Algorithm 6-2: damping 0.9, at most 10,000
-   iterations, 15 stable ones) with scikit-learn's ``AffinityPropagation`` on the
-   precomputed similarity: the number of clusters comes out of the data;
-5. every triangle of a sub-graph takes its cluster; unused triangles (usage rate < 100 %)
-   take the cluster of the nearest sub-graph across edges; every cluster is split into its
-   edge-connected parts and parts under ``min_part_fraction`` of the area are merged into
-   the neighbour with the longest shared border (``spectral.connected_patches``, as ABcut).
-   A sub-graph is connected and moves whole, so no sub-graph is ever split.
+   iterations, 15 stable ones; scikit-learn's ``AffinityPropagation``), the preference the
+   smallest similarity; above ``max_exemplar_set`` sub-graphs on that many spread evenly;
+5. every triangle takes its sub-graph's cluster, unused ones that of the nearest sub-graph;
+   each cluster is split into its edge-connected parts and parts under ``min_part_fraction``
+   of the area are merged into a neighbour (``spectral.connected_patches``).
 
-Choices where the seed is vague:
-
-* eq. 3-14 reads s = exp(-|g_i - g_k|^2 / (2 sigma^2)) + |pf_i - pf_k|^2: the second term
-  would make sub-graphs with UNLIKE features more similar, a sign slip.  We use a Gaussian
-  kernel on both distances, s = exp(-dg^2 / (2 sg^2)) + exp(-df^2 / (2 sf^2)), with sg^2 and
-  sf^2 the means of dg^2 and df^2 over all pairs (the seed's "sigma is the average of
-  |g_i - g_k|^2", read as sigma^2 so the exponent has no unit); both terms lie in (0, 1]
-  and weigh the same.  The seed's comparison "clustering with the geometric distance" keeps
-  the first term only (``similarity="geometric"``).
-* the preference s(k, k) (how readily a point becomes an exemplar; not given in the seed) is
-  the smallest similarity, Frey and Dueck's choice for "a small number of clusters".  Measured on
-  the benchmark's meshes (airplane, fish, MakeHuman body, ICT face), the median (their other
-  suggestion, scikit-learn's default) gives 22-43 clusters, the minimum 16-22 (the seed's Table 6-3:
-  4-17), and a bolus is not printed in dozens of pieces.
-* scale: affinity propagation holds N x N matrices and takes O(N^2) per iteration.  Above
-  ``max_exemplar_set`` sub-graphs (default 1,500: a 45,000-triangle region) it runs on that
-  many sub-graphs spread evenly over the surface (farthest-point order of the central
-  triangles), and every other sub-graph joins the exemplar it is most similar to (eq. 3-13
-  with the exemplars fixed).
-* a run that does not converge (scikit-learn gives no clusters then) is refused with the
-  figures, rather than returning an arbitrary split.
+Design notes: docs/design/printing.md.
 """
 from __future__ import annotations
 
@@ -283,7 +262,7 @@ def learned_segmentation(
     ``sae`` a `autoencoder.StackedAutoEncoder` (default: the shipped one); ``similarity_kind``
     "learned" (eq. 3-14) or "geometric" (the seed's comparison: centroid distance only);
     ``direction`` (3,) the build direction of the features (default: the whole mesh's best,
-    `print_orientation.orient`); ``face_groups`` (m,) the polygon of each triangle (a polygon
+    `orientation.orient`); ``face_groups`` (m,) the polygon of each triangle (a polygon
     stays in one sub-graph).  Returns a `LearnedSegmentation`.
     """
     report = progress or (lambda f, t: None)

@@ -1,7 +1,7 @@
 """Printing features of a part for a build direction (seed 6.1, eqs. 6-1..6-14; SPEC "Print orientation").
 
-For a part with faces f (unit normal n_f, area A_f, centroid c_f) and a unit build
-direction b pointing up from the build plate:
+For a part with faces f (unit normal n_f, area A_f mm^2, centroid c_f mm) and a unit build
+direction b pointing up from the build plate, h the layer height (mm):
 
 * cusp height gamma_f = |n_f . b| h (eq. 6-1), surface quality E(f) = gamma_f A_f
   (eq. 6-2) and E(M) = sum_f E(f) (eq. 6-3); over the part this is
@@ -10,19 +10,13 @@ direction b pointing up from the build plate:
 * the plate lies at z0 = min over the part's vertices of v . b, and a face's support
   column is l_f = c_f . b - z0 (eqs. 6-9..6-11 with the datum plane on the plate);
   WU(b) = sum_overhang A_f l_f (eq. 6-14, fill ratio lambda = 1), in mm^3;
-* the physical support volume is sum_overhang A_f |n_f . b| l_f (projected area x
-  height), in mm^3.
+* the physical support volume is sum_overhang A_f |n_f . b| l_f, in mm^3.
 
-Open or non-manifold meshes: every face counts once, with its own normal as given
-(one-sided); support is counted from the face's centroid straight down to the plate,
-even when another part of the mesh lies in between (eq. 6-9; a conservative upper
-bound for nested overhangs).  Degenerate input: NaN/inf coordinates and bad indices are
-refused (`topology.check_mesh`); a zero-area or needle triangle is sound here (its area
-weighs it: a zero-area face has the zero normal and adds nothing), only a part whose
-faces all have zero area is refused.
+Every face counts once, with its own normal as given; NaN/inf coordinates and bad indices
+raise `BolusError`, zero-area faces add nothing.  `PrintTerms` holds the sums over faces from
+which WQ, WU and support follow, for many directions at once (`orientation`).
 
-`PrintTerms` holds the sums over faces from which WQ, WU and support follow; the
-search (print_orientation.py) evaluates them on many directions at once.
+Design notes: docs/design/printing.md.
 """
 from __future__ import annotations
 

@@ -1,43 +1,22 @@
 """The print orientation search (seed 6.1, eqs. 6-4, 6-7, 6-10, 6-14) and the part's placement.
 
-The objective is WQ + WU (both mm^3, so they add without weights; print_measures.py).
-The seed searches only the face normals (eqs. 6-4, 6-7, 6-10); SPEC asks for the best b
-over any dense set of directions.  `orient` does it in four named steps:
+`orient` minimises WQ + WU (both mm^3, `measures`) over unit build directions b (3,) in four steps:
 
-1. `_screen`: >= 2,048 directions (a Fibonacci sphere, turned by ``rng``) plus
-   "special" ones -- +-the area-weighted mean normals of the largest normal clusters
-   (the seed's candidates), +-principal axes, directions that stand the largest flat
-   regions on edge, +-X, +-Y, +-Z -- on a reduced float32 model: faces pooled by normal
-   (m/8 bins, 128..1,024; each bin keeps its area, area vector and first moment) and the
-   plate taken over the lowest points in a few hundred directions.
-2. `_exact_candidates`: the best 32 distinct screened directions and the best 8
-   special ones, evaluated exactly (the plate over the convex-hull vertices: exact, a
-   linear function is smallest at a hull vertex).
-3. `_refine`: the objective is only piecewise smooth and even jumps (WU changes by
-   A_f l_f when a face crosses the 45 deg limit; many such steps make narrow dips of a
-   few percent, about 1-2 deg wide, on scanned surfaces), so gradients and a plain
-   pattern search get caught; the refinement is a derivative-free shrinking cap search:
-   around each of the best ``starts`` distinct candidates, ``cap_points`` directions
-   evenly spread (a Fibonacci disc) over a cap of 2 x the screening spacing (9 deg,
-   about 0.9 deg between points, denser than a 40,000-direction sphere), the best kept,
-   and the cap shrunk 3x (half the points) until it is below ``tol_deg``; starts more
-   than 3 % above the best so far are dropped.  The best region can be a sliver 0.3 deg
-   wide (ICT face part, bench/print_bench.py): 160 points and a 4x shrink missed such
-   slivers by 1.8 and 4.7 % against the independent reference of the bench; with these
-   settings all 12 bench pieces are within 0.1 % of it.  These local evaluations are exact
-   but cheap (`PrintTerms.evaluate_near`).
-4. `_break_ties`: among the directions within 0.5 % of the best (a symmetric part has
-   whole families of them), the one that makes the lowest print.
+1. `_screen`: >= 2,048 directions (a Fibonacci sphere, turned by ``rng``) plus special ones
+   (+-the mean normals of the largest normal clusters, +-principal axes, directions that stand
+   the largest flat regions on edge, +-X, +-Y, +-Z) on a reduced float32 model;
+2. `_exact_candidates`: the best 32 distinct screened and the best 8 special directions,
+   evaluated exactly (the plate over the convex-hull vertices);
+3. `_refine`: a derivative-free shrinking cap search around the best ``starts`` candidates
+   (``cap_points`` directions on a cap of 2 x the screening spacing, shrunk 3x until under
+   ``tol_deg``), evaluated exactly and cheaply (`PrintTerms.evaluate_near`);
+4. `_break_ties`: among the directions within 0.5 % of the best, the lowest print.
 
-``favour`` (optional unit vector, e.g. the mean outward normal of the skin-contact
-side): only directions with b . favour >= ``favour_min_cos`` are allowed (default 0:
-the favoured side never looks down).  A hard constraint, not a penalty, so WQ/WU keep
-their meaning.
+``favour`` (optional unit vector): only directions with b . favour >= ``favour_min_cos``.
+`place_on_plate` / `rotation_to_z` turn a part to its direction (every part of a model:
+`parts.orient_print_parts`); the public names of `measures` and `analysis.curvature` are re-exported.
 
-`place_on_plate` / `rotation_to_z` turn a part to its direction; orienting every part
-of a model (`orient_print_parts`, the seed's Tables 6-1, 6-2) is in print_parts.py.
-The measures and normal curvature live in print_measures.py and curvature.py; this
-module re-exports their public names.
+Design notes: docs/design/printing.md.
 """
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Orienting the parts of a model for printing (the seed's Tables 6-1, 6-2; SPEC `orient_parts`).
 
 `orient_print_parts` orients the whole model and every labelled part on its own with
-`print_orientation.orient` and returns a `PrintPlan`: one `PartRow` per part (faces,
+`orientation.orient` and returns a `PrintPlan`: one `PartRow` per part (faces,
 area, `Orientation`), the whole model's row, the support of the parts together against
 the whole's, and warnings.  `skin_side_up_direction` is the direction to favour so that
 the skin-contact side of a bolus shell faces up (its surface stays smooth).

@@ -1,53 +1,22 @@
 """Area-balanced spectral print segmentation (seed 6.2, eqs. 6-21..6-36).
 
-Pipeline of `print_segmentation`:
+`print_segmentation` splits a mesh V (n,3) mm, F (m,3) into about ``parts`` print parts:
 
-1. dual graph: one node per triangle, an edge between triangles that share a mesh
-   edge (consecutive faces around a non-manifold edge, as ``face_adjacency_pairs``);
-2. weights (eq. 6-22)  W_ij = exp(-e'_ij^2 / (2 sigma^2)) + eta_q q'_ij + eta_u u'_ij
-   with e_ij = |c_i - c_j|^2 (eq. 6-21, c the centroids);
+1. dual graph: one node per triangle, an edge between triangles that share a mesh edge;
+2. weights (eq. 6-22)  W_ij = exp(-e'_ij^2 / (2 sigma^2)) + eta_q q'_ij + eta_u u'_ij, e_ij =
+   |c_i - c_j|^2 (eq. 6-21, c the centroids), q' the surface quality and u' the support term
+   (eqs. 6-23, 6-24: three levels each, from the normals and the concavity);
 3. "abcut" (default): L = D - W, L' = F^-1/2 L F^-1/2 with F = diag(face areas)
    (eqs. 6-26..6-36), the k smallest eigenvectors U of L', U' = F^-1/2 U; "ratiocut"
    (the seed's "traditional method"): the k smallest eigenvectors of L itself;
-4. Gaussian mixture on the rows of the embedding (`clustering.cluster_rows`, the one
-   clustering step, shared with `spectral.segment`): for "abcut" every row counts with
-   its face's area (the measure ABcut balances), for "ratiocut" every row counts once
-   (the measure RatioCut balances); with ``face_groups`` (the polygon of each
-   triangle) the triangles of one polygon then take the label covering most of its
-   area (`spectral.vote_groups`);
-5. each cluster split into its edge-connected parts, parts below ``min_part_fraction``
-   of the area merged into the neighbour with the longest shared border
-   (``spectral.connected_patches``); parts numbered by decreasing area.
+4. Gaussian mixture on the rows of the embedding (`clustering.cluster_rows`), every row
+   weighted by its face's area for "abcut", once for "ratiocut"; with ``face_groups`` the
+   triangles of one polygon take the label covering most of its area (`spectral.vote_groups`);
+5. each cluster split into its edge-connected parts, parts under ``min_part_fraction`` of the
+   area merged into the neighbour with the longest shared border (``spectral.connected_patches``);
+   parts numbered by decreasing area (separate pieces of the mesh may give more than asked).
 
-Choices where the seed is vague:
-
-* e' (eq. 6-25): the seed's min-max would stretch the tiny spread of a uniform mesh to
-  [0, 1] and turn the distance term into noise; we divide by the 99th percentile and
-  clip to [0, 1] (scale only, like s' in spectral.py), take sigma = mean e', and clip
-  e' at 3 sigma so no edge weight falls below exp(-4.5) (the graph cannot fall apart
-  numerically).
-* q' (eq. 6-23, surface quality): eq. 6-4 with the neighbour's normal as the build
-  direction gives, per unit area and layer, |n_i . n_j|; q' keeps faces that print
-  alike together: 1 when the normals differ by < 30 deg, 0.5 when < 60 deg, 0 otherwise
-  (the seed's three levels).  So cuts prefer creases, where the cusp height and the
-  overhang status change.
-* u' (eq. 6-24, support): the per-face support of eq. 6-10 depends on a build direction
-  the segmentation does not yet know; the seed's other per-face support cue is the
-  concavity test of 6.1.3 (eq. 6-19, normal curvature K(f) > eps, eqs. 6-15..6-18):
-  concave pockets trap supports and are where the seed wants cuts.  u' = 1 when
-  neither face is concave, 0.5 when one is, 0 when both are; eps = ``concave_per_mm``
-  (default 0.02 /mm: concave with a radius of curvature under 50 mm).
-* the same W is used for both methods, so the comparison isolates the normalisation
-  (the seed's traditional method used the bare mesh graph).
-* faces of (nearly) zero area: F^-1/2 uses max(area, 1e-3 x median area).
-* the trivial first eigenvector (constant in U') carries no information and is
-  dropped before the Gaussian mixture; the embedding is scaled to unit RMS
-  (`clustering.standardise_rows`).
-* degenerate input: NaN/inf and bad indices are refused (`topology.check_mesh`);
-  zero-area triangles are sound (F^-1/2 floors their area, they weigh nothing in the
-  mixture), a mesh whose faces all have zero area is refused.
-* a mesh made of several separate pieces is allowed: every piece ends up in its own
-  part(s), so the result can have more parts than asked.
+Design notes: docs/design/printing.md.
 """
 from __future__ import annotations
 

@@ -1,38 +1,20 @@
 """Sub-graph data structure of the learned print segmentation (seed 6.4.1, Figure 6-15).
 
-A mesh is pre-segmented into sub-graphs of ``size`` (seed: 30) edge-connected triangles, each
-described by a row of 3 x size numbers: the printing features (Q', U', K') of its triangles in
-the seed's search order (Figure 6-15 (b), (c): the seed triangle, then breadth-first through
-adjacent triangles), zero-padded.  The rows feed the stacked auto-encoder (autoencoder.py).
+A mesh V (n,3) mm, F (m,3) is pre-segmented into sub-graphs of ``size`` (seed: 30) edge-connected
+triangles, each described by a row of 3 x size numbers: the printing features (Q', U', K') of its
+triangles in the seed's search order (Figure 6-15 (b), (c): the seed triangle, then breadth-first
+through adjacent triangles), zero-padded.  The rows feed the stacked auto-encoder (`autoencoder`).
 
-Pre-segmentation (`build_subgraphs`), where the seed is vague:
+* `build_subgraphs`: breadth-first growth from seed triangles laid front by front; a polygon
+  (``face_groups``) is never cut; a growth walled in early is kept when it holds at least
+  ``min_fill`` triangles, else its triangles are left unused (-1); the central triangle g
+  (eq. 3-14) is the one nearest the sub-graph's area-weighted centroid;
+* `print_features`, per triangle at the build direction b of least WQ + WU (eqs. 6-7, 6-14):
+  Q(f) = h |n_f . b| (eq. 6-1) and U(f) = c_f . b - z0 on overhangs, 0 elsewhere
+  (eqs. 6-9..6-11), each min-max normalised (eqs. 6-6, 6-13); K(f) the Moreton-Sequin normal
+  curvature mapped to [0, 1] (eq. 6-20, `analysis.curvature`).
 
-* growth: breadth-first from a seed triangle over triangles not yet taken, neighbours in
-  index order, until ``size`` triangles; with ``face_groups`` (the polygon of each triangle)
-  a polygon's triangles are taken together, so a sub-graph never cuts a polygon (it may then
-  hold one or two triangles more than ``size``; its row keeps the first ``size``);
-* seeds: the front-advancing order that leaves the fewest stranded triangles: the next seed is
-  the first free triangle in one breadth-first order of the whole dual graph (per component),
-  so sub-graphs are laid next to each other like rows of tiles;
-* a growth that stops early (walled in by taken triangles) keeps its triangles as a
-  zero-padded sub-graph when it holds at least ``min_fill`` (default size / 2) of them; fewer
-  are left unused (-1).  The triangle usage rate (seed Table 6-3: >= 93 %) is the share of
-  triangles in some sub-graph; the segmentation gives unused ones the part of a neighbour;
-* the central triangle g of a sub-graph (eq. 3-14) is its triangle nearest the sub-graph's
-  area-weighted centroid.
-
-Printing features per triangle (`print_features`, eqs. 6-4..6-6, 6-10..6-13, 6-20), where the
-seed is vague: read literally, Q_f(j) = min over directions of |n_j . d| h A_j and
-U_f(j) = min over directions of u(i, j) are ~0 for every triangle (some direction always
-lies in the triangle's plane, and u(j, j) = 0), so min-max normalisation would amplify noise.
-We evaluate both at the build direction b that minimises the whole mesh's WQ + WU (eqs. 6-7,
-6-14; `print_orientation.orient`, the direction the seed's "whole model" rows use) and per unit
-area (so a row does not depend on how finely the mesh is tessellated):
-
-* Q(f) = h |n_f . b| (the cusp height, eq. 6-1), min-max normalised (eq. 6-6);
-* U(f) = c_f . b - z0 on overhangs (n_f . b < -cos 45 deg; the support column, eqs. 6-9..6-11),
-  0 elsewhere, min-max normalised (eq. 6-13);
-* K(f) = the Moreton-Sequin normal curvature mapped to [0, 1] (eq. 6-20, curvature.py).
+Design notes: docs/design/printing.md.
 """
 from __future__ import annotations
 

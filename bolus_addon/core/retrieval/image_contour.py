@@ -1,56 +1,22 @@
 """The object's contour in a photo: spectral clustering of its edge pixels (seed 5.1.2, eqs. 5-5..5-7).
 
-Input: the image (see `image_edges.as_image`) and its edge pixels (`image_edges.edge_mask`).
-Pixel (x, y) is column x, row y (y down); RGB in [0,1].  Where the seed is vague:
+`contour_pixels` takes the image (`image_edges.as_image`; pixel (x, y) is column x, row y, y down;
+RGB in [0,1]) and its edge pixels (`image_edges.edge_mask`) and returns a `ContourResult`:
 
-1. Samples: above ``max_points`` (6,000) edge pixels, one per s x s cell of a grid, s the smallest
-   size that leaves at most that many (the first pixel of each cell in raster order): evenly
-   spread, deterministic; the other pixels take the label of their nearest sample (step 2's space).
-2. Distance (eqs. 5-6, 5-7): d_ij = p_ij + w c_ij, p in pixels, c the RGB distance with channels in
-   [0,1] (c <= sqrt 3; the seed's 0..255 values would need w / 255).  w = 80 px per unit: an
-   object that differs from its background by c = 0.3 is 24 px away from it, sensor noise of 0.02
-   per channel (c ~ 0.05) costs ~4 px.  Measured on 19 synthetic scenes (discs on textured, noisy,
-   plain and gradient backgrounds, 400 x 300 and 800 x 600): w = 20 left the disc's outline joined
-   to the background in 9, 30 and 50 in 2, 80 to 200 in 1 (a texture of nearly the disc's contrast).
-   On a grid of s px, w s, so that colour weighs against the samples' spacing as on every pixel.
-3. The graph (eq. 5-5): the seed's W is dense (P x P: 3.2 GB for 20,000 edge pixels); we keep each
-   sample's ``neighbours`` (12) nearest by d (among the 36 nearest in the joint space
-   (x, y, wR, wG, wB), whose Euclidean distance is within sqrt 2 of d), symmetrised;
-   W_ij = exp(-d_ij^2 / (2 sigma^2)) with sigma the mean d over these edges (over all pairs, as in the
-   dense W, sigma would be about the image size and every local weight ~1), at least BRIDGE_WEIGHT.
-4. Groups: the connected pieces of the graph's strong edges (d <= 3 sigma).  Groups of fewer than
-   MIN_GROUP (2 %) of the samples are specks of texture or noise: background, and left out of the
-   eigenproblem (the 2-way cut would otherwise cut off a speck: cheapest, and useless).
-5. Spectral clustering into 2 (eqs. 3-3, 3-8): L = D - W, its two smallest eigenvectors
-   (`spectral.smallest_eigenvectors`), k-means (`clustering.cluster_rows`).  Pieces the graph leaves
-   apart are first joined by their closest pair, weight max(eq. 5-5, BRIDGE_WEIGHT): otherwise the
-   null space of L holds one indicator per piece and two eigenvectors are an arbitrary mix.
-6. Which cluster is the object: the seed does not say.  The photo is of the object, so it is near
-   the middle of the frame: the object is the cluster whose pixels lie nearer the image centre on
-   average; the background's edges (clutter, texture, a table's border) spread to the corners.
-   A crumb (under MIN_GROUP of the samples) is background wherever it lies.
-   A photo holds more than two structures (the object, a line, a patch of texture...), and a 2-way
-   cut splits off only the most separate one, so step 5 is repeated on the object's cluster while
-   the cut separates two structures: while the mean weight of the edges it cuts is under SEPARATE
-   (1/2) of the graph's mean edge weight (at most MAX_SPLITS times).  In the 19 scenes, cutting the
-   disc's outline in two crossed edges of 0.75-0.98 of the mean weight, the cuts that took the
-   object from its background 0.000002-0.04 (0.50 in the noisiest scene, noise 0.06: just taken).
-   Step 5 alone is the seed's method when the first cut leaves the object alone in its cluster.
-7. The contour (Figure 5-2 (d): the object's outline, not its inner edges): the object's pixels are
-   grown by r = 2 % of the image diagonal (>= 3 px), holes filled, shrunk by r (gaps the edge
-   detection left in the outline, up to 2r, are bridged; a closing would not bridge a gap in a thin
-   curve) and holes filled again; pieces less than MIN_PIECE (1/10) as wide as the widest are
-   dropped (stray specks in the object's cluster); the outside is flooded (4-connected) in through
-   the pixels that are not the object's, 2 px deep at most (the shrinking leaves a pixel or two of
-   filled steps beside a digital curve; deeper, the flood would run in through a bridged gap and
-   along the inside of the outline); the contour is the object's pixels next to that outside: its
-   outermost pixel layer.  Where the filled outline bridges a gap or a notch narrower than 2r, the
-   object's pixels deep in it are not contour.  An outline with a gap wider than 2r is not filled,
-   and then its pixels on both sides are contour.  Points are ordered by angle about their
-   centroid.
+1. samples: above ``max_points`` (N_MAX, 6,000) edge pixels, one per s x s grid cell;
+2. distance (eqs. 5-6, 5-7): d_ij = p_ij + w c_ij, p in pixels, c the RGB distance,
+   w = W_COLOUR (80) px per unit (w s on a grid of s px);
+3. graph (eq. 5-5): each sample joined to its ``neighbours`` (12) nearest by d, symmetrised,
+   W_ij = exp(-d_ij^2 / (2 sigma^2)), sigma the mean d over these edges, >= BRIDGE_WEIGHT;
+4. groups: connected pieces of the strong edges (d <= 3 sigma); under MIN_GROUP (2 %): background;
+5. spectral clustering into 2 (eqs. 3-3, 3-8): the two smallest eigenvectors of L = D - W, then
+   k-means (`clustering.cluster_rows`), pieces of the graph first joined by their closest pair;
+6. the object is the cluster nearer the image centre; step 5 is repeated on it while the cut's
+   mean edge weight is under SEPARATE (1/2) of the graph's (at most MAX_SPLITS times);
+7. the contour: the object's outermost pixel layer after closing gaps of up to 2 % of the image
+   diagonal, filling holes and dropping pieces under MIN_PIECE; points ordered by angle.
 
-Known limits (measured on synthetic scenes): clutter nearer the image centre than the object wins
-step 6; texture whose contrast approaches the object's makes the object's outline one group with it.
+Design notes: docs/design/retrieval.md.
 """
 from __future__ import annotations
 

@@ -3,41 +3,20 @@
 Images are numpy arrays: (H,W,3) RGB, (H,W) grey or (H,W,4) RGBA (alpha ignored), uint8
 (0..255), uint16 (0..65535) or float in [0,1]; pixel (x, y) is column x, row y (y down).
 
-Pipeline of `edge_mask`:
+Pipeline of `edge_mask` (-> (H,W) bool):
 
-1. intensity (eq. 5-2): I = 0.299 R + 0.587 G + 0.114 B, in [0,1], then (our addition) a Gaussian
-   blur of ``smooth`` = 0.7 px: histogram entropies cannot tell noise from an edge.  Measured on the
-   tests' rectangle (contrast 0.4, noise 0.03): 31 % of the edge pixels within 2 px of its sides
-   without the blur, 83 % with 0.7 px, 69 % with 1 px; a clean step stays a 4-pixel line.
-   ``smooth=0`` is the seed as written.
-2. every k x k sliding block ((H-k+1) x (W-k+1) of them, Figure 5-1: neighbours overlap): its
-   intensities fall into bins of width 1 / ``levels`` counted from the block's darkest pixel, p_i
-   = count of bin i / k^2, and
-       texture entropy  -sum_i p_i ln p_i        (eq. 5-1; natural log: 0 for a uniform block,
-                                                  ln 2 for a half-and-half block, at most ln k^2)
-       edge entropy      sum_i p_i e^(1 - p_i)   (eq. 5-3; bins with p_i = 0 add nothing:
-                                                  1 for a uniform block, e^(1/2) half-and-half)
-   The seed's n "number of image intensity" is not given.  levels = 32: on the tests' scenes 16
-   lost the dark limb of a shaded sphere, 64 and 256 let noise of 0.03 spread a flat block over as
-   many bins as a step (edge pixels within 2 px of the rectangle: 60 %, 59 %; 32: 83 %).  Bins
-   counted from the block's darkest pixel instead of from 0: with fixed bins every iso-line of a
-   smooth shading or of a gradient background at a bin boundary is a 2-level "edge" (a sphere
-   rendered on a vertical gradient, 800 x 600: 44,566 edge pixels in 11 horizontal bands across the
-   frame; 6,900 with the block's bins, on the sphere's outline).
-3. E_block = eta_1 * texture + eta_2 * edge (eq. 5-4).  eta = (1, 1): for k = 3 both terms span
-   about the same range (texture 0..2.2, edge 1..2.4), so neither dominates the ranking.
-4. edge blocks: the seed sorts the blocks and takes "the large" ones.  We take the top
-   ``fraction`` (0.1) of the blocks by E_block, at most that many (E_block takes few distinct values;
-   the blocks tied at the threshold are left out: with them the rectangle at noise 0.03 had 11.5 % of
-   its blocks as edge blocks, without them 5.7 %), and never a block that is uniform (E_block = eta_2,
-   its minimum): on a clean image with fewer edge blocks than ``fraction`` only the blocks that hold
-   an intensity step are edge blocks.
-5. edge pixels (the seed: "one pixel is tested for several times in different blocks"): a pixel
-   is an edge pixel when at least (k - 1.5) / k of the blocks that cover it are edge blocks.
-   Beside a clean straight step, (k-1)/k of a pixel's blocks straddle the step, one pixel
-   further out (k-2)/k: the threshold is midway, so a clean step gives the two pixels on
-   either side of it (a 2-pixel line for every k) and a pixel still counts when noise drops
-   half a row of its blocks.  Near the image border the fraction is over the blocks that exist.
+1. intensity (eq. 5-2): I = 0.299 R + 0.587 G + 0.114 B, in [0,1], blurred by ``smooth`` (0.7 px);
+2. every k x k sliding block ((H-k+1) x (W-k+1), Figure 5-1): its intensities in bins of width
+   1 / ``levels`` (32) counted from the block's darkest pixel, p_i = count of bin i / k^2, and
+       texture entropy  -sum_i p_i ln p_i        (eq. 5-1)
+       edge entropy      sum_i p_i e^(1 - p_i)   (eq. 5-3; empty bins add nothing)
+3. E_block = eta_1 * texture + eta_2 * edge (eq. 5-4), eta = (1, 1);
+4. edge blocks: the top ``fraction`` (0.1) of the blocks by E_block, at most that many (ties at
+   the threshold left out), never a uniform block (E_block = eta_2);
+5. edge pixels: a pixel is one when at least (k - 1.5) / k of the blocks that cover it are edge
+   blocks (near the image border: of the blocks that exist).
+
+Design notes: docs/design/retrieval.md.
 """
 from __future__ import annotations
 

@@ -1,59 +1,22 @@
 """Feature skeletons of photos' contours and of models, compared by ICP (seed 5.2-5.3, eqs. 5-8..5-14).
 
-1. Feature spaces (5.2.1).  A graph with Gaussian weights W_ij = exp(-d_ij^2 / (2 sigma^2)), sigma the mean d_ij
-   over the graph's edges (eqs. 5-8, 5-10), L = D - W (eq. 3-3), and the eigenvectors of its smallest
-   eigenvalues.  The constant eigenvector (eigenvalue 0) carries nothing: it is dropped and the k = 3 following
-   ones make the feature space (the seed's "first k" is ambiguous; its figures are 3-D clouds).
-   * model vertices (`model_embedding`, eqs. 5-10, 5-11): the one-ring graph (mesh edges, `MeshTopology`).
-   * contour pixels (`image_embedding`, eqs. 5-8, 5-9): the seed's W joins every pair of pixels, with sigma the
-     mean over all pairs; we use a sparse kNN graph (symmetrised), sigma the mean of its edges, each point
-     joined to ``NEIGHBOUR_SHARE`` = 10 % of the points (at least 10), built on at most ``CONTOUR_SAMPLES`` =
-     1,500 points spread evenly by farthest-point sampling (`contour_samples`; the other points take the
-     feature coordinates of their nearest sample), so 6,000 pixels need no 6,000 x 6,000 matrix.  Why 10 %:
-     with 10 neighbours the graph is a thin ring whatever the shape, and its eigenvectors are the ring's
-     Fourier modes (every contour gives the same closed curve); joined across the silhouette's limbs the graph
-     looks like the limbs.  Silhouettes of 5 stars (3 views each) found their own model first 8 times of 15 at
-     10 % (mean rank 1.7 of 5), 2 of 15 with 10 neighbours or the seed's dense W (mean rank 3.2, 3.1); on 5 real
-     models (airplane, fish, body, two heads) 4 of 15 (mean rank 2.7; 10 neighbours 3 of 15, 3.4; chance 3 of
-     15, 3.0): a contour's skeleton and a model's are far apart in kind, and the comparison is weak.
-   Both use `spectral.gaussian_weights` (distances clipped at 3 sigma, every W_ij >= 0.011, so that one long
-   edge cannot cut the graph apart numerically).  A graph in several pieces (a model of several parts, loose
-   vertices, pixel groups) would have one zero eigenvalue per piece: `link_components` joins each piece to the
-   nearest other piece by its shortest vertex pair.  The eigenproblem: shift-invert Lanczos on one sparse LU
-   factor in a geometric `nested_dissection` order (`smallest_pairs`; dense below 300 vertices), ~2 s for 50k
-   vertices.  Eigenvector signs and, where eigenvalues repeat (symmetric shapes), the basis of an eigenspace
-   are arbitrary: the comparison (4.) tries reflections and axis permutations.  Three dimensions show at
-   most about four protrusions apart: a star with 5 arms of different lengths has its shortest arm's mode
-   in the 4th eigenvector, and that arm falls onto the centre.
-2. Skeletons (5.2.2, `skeleton`).  The embedding E (n,3) is centred and scaled to unit RMS for the steps below
-   (scale-free tolerances); the skeleton's points are rows of the embedding as given.
-   * centre vertex v0: the vertex nearest the embedding's centroid; r_i = |E_i - E_v0| (Euclidean, as the seed).
-   * GMM clusters (scikit-learn, full covariances, ``clustering.REG_COVAR``), fitted on at most ``GMM_ROWS``
-     rows drawn by ``rng``, then every row labelled.  The seed lets the user choose the number; default
-     ``DEFAULT_CLUSTERS`` = 6.  ``clusters='auto'``: the lowest BIC over ``AUTO_CLUSTERS`` (3..8) -- but on
-     these clouds (surfaces and curves, not Gaussian blobs) the BIC keeps falling as clusters are added
-     (stars, torus, sphere, ellipse contour: measured up to 12), so 'auto' nearly always takes 8.
-   * branches: a cluster holds more than one branch when its outer half (r above the middle of the cluster's
-     r range) falls into more than one graph-connected piece holding each >= ``BRANCH_SHARE`` (10 %) of it;
-     such a cluster is divided by a GMM started at the pieces' means (the seed's "divided into sets by GMM").
-   * feature points: in each set the vertex farthest from v0.  An 'end' when no graph neighbour is farther
-     from v0 (a protrusion's tip) and r >= ``END_MIN_RADIUS`` (25 %) of the largest r (bumps near the centre
-     are no protrusions); otherwise its branch continues into a neighbouring set: it goes uphill (steepest
-     ascent of r) to that branch's end and marks the end's path where it passes nearest as a 'branch' point.
-   * connection: shortest paths in the graph (edge lengths measured in the feature space) from v0 to every end
-     (one Dijkstra tree); where two paths part is a 'rendezvous'; every point is joined to the next point on
-     its path towards v0 ('centre').  Points closer than ``MERGE_RADIUS`` (2 % of the RMS radius) along the
-     tree become one (kept in the order centre > end > rendezvous > branch; two ends are never merged).
-3. `resample`: ``count`` (64) points evenly spaced by length along the skeleton's segments (the seed adds points
-   so that the two sets have similar sizes).
-4. `icp` (eqs. 5-12, 5-13): Y is moved onto X, each moved y_i paired with its closest x (Z^k, eq. 5-12) and
-   (R, T) refitted to the pairs (eq. 5-13, Kabsch), from several starting orientations at once: the 48 signed
-   permutation matrices (24 rotations and their mirror images: eigenvector signs and order are arbitrary, and
-   a mirrored shape has the same feature space), plus random rotations drawn by ``rng`` if more are asked.
-   R keeps the determinant of its start (a mirrored start stays mirrored).  The error is the RMS of eq. 5-14.
-5. `dissimilarity`: both skeletons resampled, centred at v0 and scaled to unit RMS radius about it
-   (`skeleton_samples`: photo and model sizes differ), ICP both ways, the mean of the two RMS errors
-   (symmetric).  0 for a skeleton and itself.
+1. Feature spaces (5.2.1): a graph with Gaussian weights W_ij = exp(-d_ij^2 / (2 sigma^2)), sigma the
+   mean d_ij over its edges (eqs. 5-8, 5-10), L = D - W (eq. 3-3); the k = 3 eigenvectors after the
+   constant one.  Model vertices (`model_embedding`, eqs. 5-10, 5-11): the one-ring graph; contour
+   pixels (`image_embedding`, eqs. 5-8, 5-9): a kNN graph joining each point to ``NEIGHBOUR_SHARE``
+   (10 %) of at most ``CONTOUR_SAMPLES`` points (`contour_samples`).  Pieces are joined by
+   `link_components`; the eigenproblem is `smallest_pairs` (shift-invert Lanczos, `nested_dissection`).
+2. Skeletons (5.2.2, `skeleton`) of an embedding E (n,3), centred and scaled to unit RMS: centre
+   vertex v0 (nearest the centroid), r_i = |E_i - E_v0|; GMM clusters (``DEFAULT_CLUSTERS`` = 6 or
+   'auto': lowest BIC over ``AUTO_CLUSTERS``), clusters holding several branches divided; in each set
+   the vertex farthest from v0 an 'end' or a 'branch' point; one shortest-path tree from v0 to the
+   ends ('rendezvous' where paths part); points closer than ``MERGE_RADIUS`` along it merged.
+3. `resample`: ``count`` (64) points evenly spaced by length along the skeleton's segments.
+4. `icp` (eqs. 5-12, 5-13): Y moved onto X by closest-point pairs (Z^k) and Kabsch fits of (R, T), from
+   the 48 signed permutation matrices (and random rotations by ``rng``); error: the RMS of eq. 5-14.
+5. `dissimilarity`: both skeletons resampled, centred at v0, scaled to unit RMS radius
+   (`skeleton_samples`), ICP both ways, the mean of the two RMS errors (0 for a skeleton and itself).
+Design notes: docs/design/retrieval.md.
 """
 from __future__ import annotations
 

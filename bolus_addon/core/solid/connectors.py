@@ -1,44 +1,22 @@
 """Pegs and holes that make the printed parts of a bolus fit together (seed 6.4.3, Figure 6-17).
 
-Each joint (the planar common face of two neighbouring parts, `solid_parts.split_solid`)
-gets cylinders "on two sides close to the edge of the connected surfaces": near the two
-ends of the joint face.  The seed puts "two connectors into one segment, one convex and
-the other concave", so the first connector is a peg on the joint's first part and a hole
-in its second, the second one the other way round: every part of a joint carries one peg
-and one hole (the parts cannot be put together the wrong way round) and both pegs are
-parallel, so the parts slide together along one axis.  All volume work is manifold3d
-(cylinders, union, difference, clipping); the placement is 2D work on the joint face as a
-``manifold3d.CrossSection`` (its inward offset is the set of admissible peg centres).
+Each joint (the planar common face of two neighbouring parts, `parts.split_solid`) gets two
+cylinders near the two ends of the joint face: a peg on the joint's first part with its hole in
+the second, and one the other way round, both parallel to one axis.  Volume work is manifold3d
+(cylinders, union, difference, clipping); placement is 2D work on the joint face as a
+``manifold3d.CrossSection`` (its inward offset holds the admissible peg centres).
 
-Sizes (the one place for them, below), from the wall thickness t at the joint (the
-shell's own thickness there: the joint face is wider where the plane meets the shell
-obliquely):
+Sizes from the wall thickness t (mm) at the joint: peg diameter PEG_DIAMETER_FRACTION (40 %) of
+t, at least PEG_MIN_DIAMETER (2 mm); hole radius = peg radius + clearance (CLEARANCE, 0.2 mm);
+WALL_MIN (1.5 mm) around the hole, so t >= 2 (r + c + 1.5), else the joint stays plain; peg
+length 1.5 x its diameter, at least 3 mm, hole depth = length + clearance; the cylinders reach
+EMBED (1 mm, `embed_length`) back into the peg's own part.  Axis: the plane normal, else tilted
+into the shell's tangent (`joint_axes`, up to MAX_TILT_DEG); `fit_in_wall` centres the hole in
+the wall.  Each site is checked with manifold volumes (peg inside its part and adding exactly
+its protruding volume, the widened hole inside the other part, clear of earlier connectors);
+a failing site is tried aside, shorter, then farther inward, else dropped with a note.
 
-* peg diameter 40 % of t, at least 2 mm: a peg under 2 mm breaks off or prints as a blob
-  on a 0.4 mm nozzle; 40 % leaves 30 % of the wall on either side of the peg;
-* hole radius = peg radius + clearance (default 0.2 mm, a free, not press, fit for FDM);
-* at least 1.5 mm of material around the hole (three to four 0.4 mm perimeters):
-  ``t >= 2 (r + c + 1.5)``, 5.4 mm for a 2 mm peg with 0.2 mm clearance (a 10 mm bolus
-  gets 4 mm pegs; a thinner wall is left plain with a warning);
-* peg length 1.5 x its diameter, at least 3 mm (enough to register the parts; a longer
-  peg runs out of a curved shell); hole depth = peg length + clearance;
-* the cylinders reach back EMBED = 1 mm behind the joint plane into the peg's own part
-  (more for a tilted axis, `embed_length`), so the union overlaps instead of touching;
-  that length lies inside the part and adds no volume.
-
-Placement: the axis is the plane normal (square to the joint face), else the normal
-tilted into the shell's tangent (`joint_axes`, up to MAX_TILT_DEG).  Where the plane
-meets the shell obliquely a hole centred in the wall at the plane drifts across the wall
-as it goes deeper, so `fit_in_wall` moves each centre across the joint strip (from the
-local wall: inner face, outer face) and shortens the peg until the hole with its walls
-stays in the middle of the wall.
-
-Checks, with manifold volumes on the parts clipped around the connector: the peg's base
-lies inside its part, the peg adds exactly the volume of its protruding length, and the
-hole widened by the 1.5 mm wall (and deepened by it) lies inside the other part, clear of
-the connectors placed before.  A site failing them is tried a little to either side and
-shorter, then the next site inward along the joint; a connector with no site left is
-dropped with a note.
+Design notes: docs/design/solid.md.
 """
 from __future__ import annotations
 

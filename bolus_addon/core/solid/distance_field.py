@@ -4,26 +4,19 @@ The shell is the set where
 
     f(x) = min( sd(x) - c,  t - sd(x),  r(x) )  > 0                                  (field)
 
-* ``sd`` is the signed distance to the skin triangles: the exact point-triangle distance
-  (Ericson's closest point, vectorised), the sign that of ``(x - foot) . n`` with n the
-  pseudo-normal of the foot's feature (Baerentzen & Aanaes 2005: the face normal inside a face,
-  the sum of the two face normals on an edge, the angle-weighted normal at a vertex), which is
-  the correct side wherever the skin is locally watertight (an interpolated vertex normal is
-  not: it flipped the sign at the folded mouth corners of the example face).  True distance,
-  not a normal push: the offset surface {sd = t} cannot fold in concave spots (sides of the
-  nose, eye sockets), where a per-vertex push self-intersects.
-* ``c`` the clearance (inner face), ``t`` the thickness (outer face), both from the skin.
-* ``r`` closes the rim: where the foot point lies ON a border edge or border vertex of the
-  region (decided exactly from the barycentric coordinates), r = -(lateral distance of x from
-  the border's normal line), so the rim wall is the surface swept by the normals along the
-  border; elsewhere r = distance of the foot point to the border, capped at a few voxels.
-  Hole borders get the same wall.
+* ``sd``: the signed distance to the skin triangles, the exact point-triangle distance (Ericson's
+  closest point, vectorised), signed by ``(x - foot) . n`` with n the pseudo-normal of the foot's
+  feature (Baerentzen & Aanaes 2005: face, edge or angle-weighted vertex normal);
+* ``c`` the clearance (inner face), ``t`` the thickness (outer face), both mm from the skin;
+* ``r`` closes the rim: where the foot lies on a border edge or vertex (exact, from the
+  barycentrics), r = -(lateral distance of x from the border's normal line); elsewhere the
+  foot's distance to the border, capped at a few voxels.  Hole borders get the same wall.
 
-Nearest triangles come from a KD-tree of sub-triangle centres (each triangle split so a centre
-is within ``sub_radius`` of every point of its piece): the best of the triangles owning the k
-nearest centres is exact, or farther than the true nearest by at most sub_radius (about
-sub_radius^2 / 2d at a distance d above a smooth patch).
+Nearest triangles come from a KD-tree of sub-triangle centres (pieces of radius <= ``sub_radius``
+mm): exact, or farther than the true nearest by at most sub_radius.
 Arrays: V (n,3) float64 mm, F (m,3) int64, query points X (k,3).
+
+Design notes: docs/design/solid.md.
 """
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Joints of solid print parts: the faces two parts share on one plane and their connectors
-(seed 6.4.3; step 5 of `solid_parts.split_solid`).
+(seed 6.4.3; step 5 of `parts.split_solid`).
 
 `Joint`: normal . x + offset = 0 from parts[0] into parts[1], its area, wall thickness and
 `connectors.Connector`s.  `_joints` intersects the parts' cut faces per plane (2D

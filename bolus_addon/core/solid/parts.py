@@ -1,51 +1,22 @@
-"""Closed solid print parts of a bolus with planar joints and connectors (seed 6.3-6.4.3,
-eqs. 6-38..6-40).
+"""Closed solid print parts of a bolus with planar joints and connectors (seed 6.3-6.4.3).
 
-`split_solid` takes the closed solid (a `shell.Shell`'s arrays), the skin region it was
-built on and a part label per skin triangle (the area-balanced cut of
-`print_segmentation`), and returns the solid cut into closed parts:
+`split_solid` takes the closed solid (a `shell.Shell`'s V (n,3) mm, F (m,3), side (m,)), the skin
+region it was built on and a part label per skin triangle (`print_segmentation`), and returns
+the closed parts as `SolidParts`:
 
 1. neighbouring parts: skin labels that share a skin edge;
-2. common plane of each pair (6.4.3): a linear support vector machine on the two parts'
-   skin vertices, x^T W + b = 0 (eqs. 6-38..6-40), W normalised, pointing from the lower
-   label to the higher.  We use ``sklearn.svm.LinearSVC`` (the primal of eq. 6-38 with a
-   squared hinge, C = 1e3): the hard-margin plane of eq. 6-38 is its large-C limit, it
-   costs O(n) per pass on the tens of thousands of vertices of a face region where
-   ``SVC(kernel='linear')`` (the dual, eq. 6-39) grows with n^2, and it still returns a
-   plane when a wavy border is not exactly separable.  The coordinates are centred and
-   scaled by one factor first (an isotropic scaling keeps the maximum-margin plane), so
-   LinearSVC's penalty on the intercept does not bias the plane; vertices on the shared
-   border belong to both parts and are left out; classes are balanced.
-3. cells: the solid split by every plane (``Manifold.split_by_plane``), each connected
-   piece (``decompose``) a cell.  A plane reaches beyond its joint and may cross the shell
-   elsewhere, so a cell goes to the part whose skin lies under it (area vote of the
-   nearest skin triangles of the cell's inner faces; all its faces if it has none); then
-   a group of a part's cells cut off from the part's largest group goes to the part it
-   shares most plane face with (a sliver along the rim votes for the skin under its outer
-   face, which need not be the part it touches).  Every cell lies in one region of the
-   plane arrangement (a sign per plane).  Two cells of different parts in one region (a
-   plane crossing a strongly curved shell twice) get an extra separating plane (the same
-   SVM on their vertices) as long as that helps, at most MAX_EXTRA_PLANES; what is left
-   goes with the larger and is warned about.
-4. parts: manifold3d cannot glue pieces back together (the union of two halves of a cut
-   keeps the cut as a slit), so each part is cut out of the whole solid once:
-   part q = solid ∩ K_q, K_q a union of convex polytopes (the bounding box trimmed by
-   planes): one per cell region of q grown over all regions that hold no material and
-   one more over each two neighbouring regions of q (so no two polytopes of K_q merely
-   touch inside the solid).  The parts are closed by construction and their volumes add
-   up to the solid's to round-off.  Separate crumbs of the solid and slivers the planes
-   cut off, under CRUMB_MM3 each, are left out with a warning (a slicer drops them too);
-   a part that still falls into pieces is warned about.
-5. joints: the faces two parts share on one plane (2D CrossSections of their cut faces,
-   intersected).  The largest face of each pair gets the connectors (`connectors`: sized
-   from the wall thickness at the joint, placed near the two ends of the face, each part
-   one peg and one hole), or a note (and a warning) why not.
+2. the common plane of each pair, x^T W + b = 0 (eqs. 6-38..6-40): a linear SVM on the two
+   parts' skin vertices, W unit, pointing from the lower label to the higher;
+3. cells: the solid split by every plane, each cell given to the part whose skin lies under it;
+   two parts' cells in one region of the plane arrangement get an extra separating plane;
+4. parts: part q = solid ∩ K_q, K_q a union of convex polytopes (the bounding box trimmed by
+   planes); crumbs and slivers under CRUMB_MM3 are left out with a warning;
+5. joints: the faces two parts share on one plane; the largest of each pair gets `connectors`.
 
-Faces: the solid's faces keep their ``side`` (manifold3d carries the face ids through the
-booleans), faces on a joint plane are SIDE_CUT, peg and hole walls SIDE_CONNECTOR.
+The solid's faces keep their ``side``, faces on a joint plane are SIDE_CUT, peg and hole walls
+SIDE_CONNECTOR.  Steps 1-3 and the region terms are in `planes`, step 5 in `joints`.
 
-Modules: steps 1-3 and step 4's region terms in `solid_planes`, step 5 in `solid_joints`; this
-module drives them and cuts the parts out (step 4).
+Design notes: docs/design/solid.md.
 """
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
 """The common planes of neighbouring print parts and the cells they cut the solid into
-(seed 6.4.3, eqs. 6-38..6-40; steps 1-3 and the region terms of step 4 of `solid_parts`).
+(seed 6.4.3, eqs. 6-38..6-40; steps 1-3 and the region terms of step 4 of `parts.split_solid`).
 
 `skin_neighbours`: label pairs sharing a skin edge; `svm_plane`: their plane x^T W + b = 0
-by a linear SVM (LinearSVC; see the module doc of `solid_parts`).  The private helpers split
+by a linear SVM (LinearSVC; why: docs/design/solid.md).  The private helpers split
 a manifold3d solid by planes into cells (connected pieces), give each cell its owner part
 and its side of every plane, and write a part's region of the plane arrangement as convex
 terms {plane: sign}; `_tracked` / `_faces` carry the solid's face ids through the booleans.

@@ -1,44 +1,21 @@
 """The bolus shell: a closed printable solid of chosen thickness on a skin region (seed 1.1).
 
-Method.  The solid is the positive set of the one-sided distance field of
-`distance_field.SkinDistance` (f = min(sd - c, t - sd, r)): inner face at the clearance c,
-outer face at the TRUE distance t from the skin, rim wall swept along the border normals.
-A true distance offset cannot fold in concave spots (a per-vertex normal push, Blender's
-Solidify, folds and thins there), and a level set of one scalar field is closed and
-manifold by construction.  The field is computed exactly (vectorised numpy + KD-tree) on the
-two lattices of manifold3d's body-centred cubic grid and handed to
-``manifold3d.Manifold.level_set`` through a callback that only looks values up.  manifold3d
-is a maintained library whose level set (marching tetrahedra) and booleans always give
-manifold output, it ships as small wheels for every Blender platform and runs the same on
-Blender 4.2 to 5.2 (Blender's own SDF nodes give only the unsigned, two-sided distance on an
-open surface, and its Manifold boolean is 5.0+).
+`make_shell` takes a skin region V (n,3) mm, F (m,3) (open, normals pointing away from the body),
+the thickness t, clearance c and voxel size res (mm), and returns a `Shell`: V, F, the SIDE_* of
+each face, the volume (mm^3), the ray thickness figures (mm) and warnings.
 
-Holes of the region (every border loop but the outer one) get the rim wall in the field and,
-because the level set bridges a hole narrower than about two voxels or covered by the
-offsets of its bulging sides (lips), a cutter: the hole's membrane (its loop triangulated in
-the best-fit plane) swept from t below to 2t above the skin along each border vertex's
-channel direction (the mean skin normal within t of it: the lips' own border normals point
-at each other), built as a union of convex hulls (valid even where the directions converge)
-and subtracted with a manifold boolean.  A prism along the loop's mean normal (the spike's
-first try) cut a nose apart when the loop was far from planar.  Pieces below 2 % of the
-largest one's volume (crumbs of the cut) are dropped, and the arrays are read back until
-stable (manifold3d collapses coincident level-set vertices on reading).
+The solid is the positive set of the one-sided distance field of `distance_field.SkinDistance`,
+f = min(sd - c, t - sd, r): inner face at c, outer face at the true distance t from the skin, rim
+wall swept along the border normals; `grid` samples the field and meshes its zero surface,
+closed and manifold by construction.  Every border loop but the outer one is a hole: it gets
+the rim wall in the field and a cutter, its membrane swept along the channel directions from t
+below to 2t above the skin (a union of convex hulls), subtracted with a manifold boolean.
+Pieces under KEEP_PIECE_FRACTION of the largest are dropped (`shell_checks`); then the face
+sides, the wall thickness (rays from the inner face), the topology and, given ``others``, the
+collision with the rest of the skin are checked.  A border that zigzags along whole triangles
+is built once more without its saw teeth.
 
-Speed: the field is exact only where it decides the surface (a coarse lattice and Lipschitz
-bounds settle the rest); the level set's Python callback (about 1-1.5 us for each of the
-2 x box / res^3 lattice points, the box being the skin swept t along its normals) is the
-floor.  Nose region of the example face (3,800 triangles, 7,000 mm^2) at 0.5 mm: about 28 s,
-0.46 GB; at 1.0 mm about 7 s (2 cores, shared machine).
-
-Limits: the inner face is the skin resampled at the resolution (a sharp crease is rounded by
-up to about one voxel at 1 mm); cavities left in the region (nostril pockets) and valleys
-narrower than 2 t (beside the nose) are filled; where a hole runs within a few mm of the outer
-border the rim wall and the hole's channel converge and can leave a thin fin or a tiny tunnel
-(the example's 45 mm nose region passes 3.6 mm from the mouth corners: genus 2 at 0.5 mm where
-its one mouth hole gives 1; slices show 1-2 mm^2 islands at x = +-14..18 mm, z 106..108).  A
-border cut along whole faces zigzags in teeth smaller than a voxel: the rim wall swept along it
-is pleated and the level set leaves tiny tunnels there (a dome band cut so: genus 13 at 1 mm,
-29 at 0.5 mm; cut along a ring: genus 1) -- select_area's smooth border avoids it.
+Design notes: docs/design/solid.md.
 """
 from __future__ import annotations
 
@@ -154,9 +131,9 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     this distance (mm, 0 = on the skin); resolution: voxel size (mm) of the level set.
     others: (V2 (k,3), F2 (j,3)) the rest of the skin or None: `BolusError` naming the spot if
     the shell would run into it.  time_limit_s: the user's time limit (core.budget; None: the
-    default budget, 0: none): a wall estimated to take longer is refused before the work.  Every border loop but the outer one (enclosing the most area
-    seen along the region's mean normal) is a hole, kept open through the solid.  Returns a
-    `Shell`.
+    default budget, 0: none): a wall estimated to take longer is refused before the work.
+    Every border loop but the outer one (enclosing the most area seen along the region's mean
+    normal) is a hole, kept open through the solid.  Returns a `Shell`.
     """
     check_shell_request(thickness, clearance, resolution)
     t, c, res = float(thickness), float(clearance), float(resolution)
