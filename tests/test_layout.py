@@ -58,6 +58,11 @@ def test_modules_and_functions_are_within_their_caps(report):
     assert over <= KNOWN_OVER, sorted(over - KNOWN_OVER)
 
 
+def test_module_docstrings_are_short(report):
+    """A module docstring says what the module does in at most 25 lines; design notes live in docs/design/."""
+    assert report["long_docstrings"] == []
+
+
 def test_code_names_no_issue_and_no_file_points_outside_the_repository(report):
     assert report["issue_references"] == []
     assert report["outside_references"] == []
