@@ -189,27 +189,30 @@ def _solid_on_grid(skin, grid, t, c, progress, stats, mesher: str = "cubes"):
     rim_cap = 3.0 * float(grid.sp.max())
     band = t + 3.0 * float(grid.sp.max()) + skin.tri_rmax
     coarse = _coarse_terms(skin, grid, t, c, band)
+    lattices = (0, 1) if mesher == "level_set" else (0,)
     p_mid = 0.55 if mesher == "level_set" else 0.45
-    f0, n0 = _field_coarse_to_fine(skin, grid, 0, t, c, rim_cap, band, coarse, progress, 0.05, 0.30 if
-                                   mesher == "level_set" else p_mid)
-    f1, n1 = None, 0
-    if mesher == "level_set":
-        f1, n1 = _field_coarse_to_fine(skin, grid, 1, t, c, rim_cap, band, coarse, progress, 0.30, p_mid)
+    step = (p_mid - 0.05) / len(lattices)
+    fields, n_exact = [], 0
+    for i, lattice in enumerate(lattices):
+        f, n = _field_coarse_to_fine(skin, grid, lattice, t, c, rim_cap, band, coarse, progress,
+                                     0.05 + i * step, 0.05 + (i + 1) * step)
+        fields.append(f)
+        n_exact += n
     del coarse
-    stats["exact_points"] = stats.get("exact_points", 0) + n0 + n1
-    stats["grid_points"] = stats.get("grid_points", 0) + (grid.points if mesher == "level_set"
-                                                          else int(np.prod(grid.shape0)))
-    if not (np.max(f0, initial=-1.0) > 0 or (f1 is not None and np.max(f1, initial=-1.0) > 0)):
+    stats["exact_points"] = stats.get("exact_points", 0) + n_exact
+    stats["grid_points"] = stats.get("grid_points", 0) + sum(
+        int(np.prod(grid.shape0 if lattice == 0 else grid.shape1)) for lattice in lattices)
+    if not any(np.max(f, initial=-1.0) > 0 for f in fields):
         raise BolusError("the region is too small for this resolution: no voxel lies inside the shell; choose a "
                          "finer resolution or a larger region")
     stats["field_s"] = stats.get("field_s", 0.0) + time.process_time() - T0
     _progress(progress, p_mid, "marching cubes" if mesher == "cubes" else "level set")
     T1 = time.process_time()
     if mesher == "cubes":
-        M = marching_manifold(f0, grid.lo - grid.sp, grid.sp)
+        M = marching_manifold(fields[0], grid.lo - grid.sp, grid.sp)
     else:
-        M = _level_set_fast(grid, f0, f1)
-    del f0, f1
+        M = _level_set_fast(grid, *fields)
+    del fields
     stats["level_set_s"] = stats.get("level_set_s", 0.0) + time.process_time() - T1
     stats["mesher"] = mesher
     if str(M.status()).split(".")[-1] != "NoError" or M.is_empty():
