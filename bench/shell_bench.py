@@ -24,7 +24,8 @@ For every region, each call in a child process of its own (``--worker``: the fig
 of one call do not depend on what ran before, and the peak memory is the child's):
 
 * ours: ``make_shell(V, F, thickness=10, resolution=r)`` for r in ``RESOLUTIONS`` (0.5 and 1.0 mm;
-  ``--resolution R`` (repeatable) runs R instead);
+  ``--resolution R`` (repeatable) runs R instead), with the marching-cubes mesher and again with
+  the previous one, manifold3d's level set (``mesher="level_set"``, rows "ours R mm level set");
 * the peer: Blender's Solidify modifier on a mesh object of the same region,
   ``solidify_mode='NON_MANIFOLD'`` (complex), ``thickness=10``, ``offset=+1`` (the new
   face on the side the normals point to), ``use_rim=True``, ``use_even_offset=True``,
@@ -102,6 +103,9 @@ SPOTS = 3  # self-intersections: where the first few are (JSON)
 TARGET_S, TARGET_RES_MM = 30.0, 0.5  # the target: a 10 mm shell in under 30 s at 0.5 mm
 #: (key, nonmanifold_thickness_mode)
 SOLIDIFY_MODES = (("Solidify even", "EVEN"), ("Solidify constraints", "CONSTRAINTS"))
+#: ours with each mesher (core.solid.grid.MESHERS): marching cubes, and the previous method,
+#: manifold3d's level set ("ours R mm level set"), measured beside it in the same run
+MESHERS = ("cubes", "level_set")
 REGIONS = ("example nose", "nefertiti face", "demosthenes face")
 QUICK_REGIONS = ("example nose",)
 
@@ -418,7 +422,8 @@ def work_ours(data: dict, job: dict) -> tuple[dict, dict]:
     from bolus_addon.core.solid.shell import make_shell
 
     V, F = data["V"], data["F"]
-    sh, st = measured(lambda: make_shell(V, F, thickness=job["thickness"], resolution=job["resolution"]))
+    sh, st = measured(lambda: make_shell(V, F, thickness=job["thickness"], resolution=job["resolution"],
+                                         mesher=job.get("mesher", "cubes")))
     st.update(volume_mm3=float(sh.volume_mm3), holes=int(sh.holes), warnings=list(sh.warnings),
               self_thickness=[float(sh.thickness_min), float(sh.thickness_mean), float(sh.thickness_max)],
               shell_stats=getattr(sh, "stats", None))
@@ -523,12 +528,13 @@ def bench_region(region: dict, resolutions, tmp: Path, keep: bool = False, parts
     row = {"region": name, "how": region["how"], "faces": int(len(F)), "runs": [], "parts": None}
     skin = {"V": V, "F": F}
     shells = {}
-    for res in resolutions:
-        key = f"ours {res:g} mm"
+    for res, mesher in [(r, m) for r in resolutions for m in MESHERS]:
+        key = f"ours {res:g} mm" + ("" if mesher == "cubes" else " level set")
         try:
-            out, st = run_worker("ours", skin, tmp, keep, region=name, thickness=t, resolution=res)
+            out, st = run_worker("ours", skin, tmp, keep, region=name, thickness=t, resolution=res, mesher=mesher)
             m = measure_solid(out["V"], out["F"], out["side"] == SIDE_OUTER, out["side"] == SIDE_RIM, V, F, t)
-            shells[res] = out
+            if mesher == "cubes":
+                shells[res] = out
             run = {"method": key, **st, **m, "folded": None}
         except Exception as exc:
             run = benchutil.error_row("method", key, exc)

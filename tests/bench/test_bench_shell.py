@@ -217,7 +217,8 @@ def test_bench_region_smoke_run(sb, bpy, tmp_path):
     V, F = meshgen.spherical_cap(60.0, 30, 4)
     region = {"name": "cap", "V": V, "F": F, "how": "meshgen.spherical_cap(60, 30, 4)"}
     row = sb.bench_region(region, (2.0,), tmp_path)
-    assert [r["method"] for r in row["runs"]] == ["ours 2 mm", "Solidify even", "Solidify constraints"]
+    assert [r["method"] for r in row["runs"]] == ["ours 2 mm", "ours 2 mm level set", "Solidify even",
+                                                  "Solidify constraints"]
     for r in row["runs"]:
         assert "error" not in r, r
         assert r["seconds"] > 0 and r["peak_mb"] > 0 and r["triangles"] > 0
@@ -226,8 +227,10 @@ def test_bench_region_smoke_run(sb, bpy, tmp_path):
         assert th["rays"] > 20 and th["outer"] == th["rays"] and 9.5 < th["min"] <= th["mean"] <= th["max"] < 10.6
     ours = row["runs"][0]
     assert ours["volume_mm3"] == pytest.approx(ours["closed"]["volume_mm3"], rel=1e-6)
+    solidify = row["runs"][2]
+    assert ours["closed"]["volume_mm3"] == pytest.approx(solidify["closed"]["volume_mm3"], rel=0.03)
     assert ours["closed"]["volume_mm3"] == pytest.approx(row["runs"][1]["closed"]["volume_mm3"], rel=0.03)
-    assert row["runs"][1]["folded"] == 0
+    assert solidify["folded"] == 0
     p = row["parts"]
     assert "error" not in p, p
     assert p["part_count"] >= 2 and all(p["parts_closed"])

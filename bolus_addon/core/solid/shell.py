@@ -123,17 +123,19 @@ def _fmt(p):
 
 # ---------------------------------------------------------------------------- make_shell
 def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=None, progress=None,
-               time_limit_s=None, _saw_retry=True) -> Shell:
+               time_limit_s=None, mesher="cubes", _saw_retry=True) -> Shell:
     """A closed bolus solid on the skin region V (n,3) mm, F (m,3) (an open surface whose face
     normals point away from the body; the shell grows on that side).
 
     thickness: outer face at this true distance (mm) from the skin; clearance: inner face at
-    this distance (mm, 0 = on the skin); resolution: voxel size (mm) of the level set.
+    this distance (mm, 0 = on the skin); resolution: voxel size (mm) of the field's lattice.
     others: (V2 (k,3), F2 (j,3)) the rest of the skin or None: `BolusError` naming the spot if
     the shell would run into it.  time_limit_s: the user's time limit (core.budget; None: the
     default budget, 0: none): a wall estimated to take longer is refused before the work.
     Every border loop but the outer one (enclosing the most area seen along the region's mean
-    normal) is a hole, kept open through the solid.  Returns a `Shell`.
+    normal) is a hole, kept open through the solid.  mesher: "cubes" (marching cubes) or
+    "level_set" (manifold3d's level set, the slower peer of the benchmarks; `grid.MESHERS`).
+    Returns a `Shell`.
     """
     check_shell_request(thickness, clearance, resolution)
     t, c, res = float(thickness), float(clearance), float(resolution)
@@ -146,7 +148,7 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     check_shell_request(t, c, res, skin.area)
     _check_region(skin)
     warnings: list[str] = []
-    M = _solid_in_box(skin, V, t, c, res, progress, stats)
+    M = _solid_in_box(skin, V, t, c, res, progress, stats, mesher)
     T1 = time.process_time()
     holes = skin.loops[1:]
     M = _cut_holes(skin, M, holes, t, res, progress, warnings)
@@ -166,7 +168,7 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     tmin, tmean, tmax = _thickness_figures(th, rays, spot, t - c, warnings)
     topo_warnings = _topology_warnings(skin, M)
     if _saw_retry and topo_warnings and "more tunnel" in topo_warnings[0]:
-        again = _again_without_teeth(V, F, t, c, res, others, progress, time_limit_s)
+        again = _again_without_teeth(V, F, t, c, res, others, progress, time_limit_s, mesher)
         if again is not None:
             return again
     warnings += topo_warnings
@@ -202,8 +204,8 @@ def _check_size(V, F, t, c, res, others, time_limit_s) -> None:
                       f"{area / 100:.0f} cm²)", triangles=read, limit=time_limit_s)
 
 
-def _solid_in_box(skin, V, t, c, res, progress, stats):
-    """The level-set solid of the field (thickness t, clearance c, voxel res mm), first on a box
+def _solid_in_box(skin, V, t, c, res, progress, stats, mesher="cubes"):
+    """The solid of the field (thickness t, clearance c, voxel res mm, `mesher`), first on a box
     around the skin swept t along its normals (`_tight_box`: about a third fewer grid points on a
     face); if the solid comes within a voxel of that box (a crease's normal cone reaching farther
     out), again on the full box (the region's box grown by t + 3 res; stats["box_retry"])."""
@@ -215,7 +217,7 @@ def _solid_in_box(skin, V, t, c, res, progress, stats):
             stats["box_retry"] = True
         else:
             grid = _Grid(np.maximum(lo, V.min(axis=0) - pad), np.minimum(hi, V.max(axis=0) + pad), res)
-        M = _solid_on_grid(skin, grid, t, c, progress, stats)
+        M = _solid_on_grid(skin, grid, t, c, progress, stats, mesher)
         bb = np.asarray(M.bounding_box()).reshape(2, 3)
         if attempt or (np.all(bb[0] - grid.lo > grid.res) and np.all(grid.hi - bb[1] > grid.res)):
             break
@@ -296,7 +298,7 @@ def _thickness_figures(th, rays, spot, wall, warnings) -> tuple[float, float, fl
     return tmin, tmean, tmax
 
 
-def _again_without_teeth(V, F, t, c, res, others, progress, time_limit_s):
+def _again_without_teeth(V, F, t, c, res, others, progress, time_limit_s, mesher="cubes"):
     """The shell made once more without the border's saw teeth (`drop_border_ears`: triangles
     with two border edges, whose pleated rim wall leaves tiny tunnels), its first warning naming
     them; None when the border has no teeth."""
@@ -304,7 +306,7 @@ def _again_without_teeth(V, F, t, c, res, others, progress, time_limit_s):
     if not ears:
         return None
     _progress(progress, 0.5, f"again without the border's {ears} saw teeth")
-    again = make_shell(V, F2, t, c, res, others=others, _saw_retry=False, time_limit_s=time_limit_s,
+    again = make_shell(V, F2, t, c, res, others=others, _saw_retry=False, time_limit_s=time_limit_s, mesher=mesher,
                        progress=None if progress is None else (lambda f, text: progress(0.5 + 0.5 * f, text)))
     size = float(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).max())
     again.warnings.insert(0, f"the region's border zigzags along whole triangles: its {ears} teeth (triangles "
