@@ -210,11 +210,21 @@ def _drop_crumbs(M):
     return M, [float(v) for v in vols[~keep]]
 
 
+#: mm: edges whose collapse moves the surface by less than this are collapsed first
+SLIVER_TOL_MM = 1e-3
+
+
 def _clean(M):
-    """Crumbs dropped, and the arrays made stable: manifold3d's own output can hold coincident
-    vertices (grid points snapped onto the surface) that it collapses when the arrays are read
-    back, which can pinch off more crumbs, so round-trip until reading back changes nothing.
-    Returns (Manifold, V, F, dropped volumes, pieces)."""
+    """Slivers collapsed, crumbs dropped, and the arrays made stable.
+
+    Marching cubes leaves tiny triangles where the surface passes within a hair of a lattice
+    point, and a boolean with a hole channel can then leave two of them 1e-5 mm apart, which
+    Blender's BVH overlap test (the 3D-Print Toolbox's intersection check) reports as
+    intersecting: `Manifold.simplify` collapses every edge whose removal moves the surface by
+    less than `SLIVER_TOL_MM`.  manifold3d's output can also hold coincident vertices that it
+    collapses when the arrays are read back, which can pinch off more crumbs, so round-trip
+    until reading back changes nothing.  Returns (Manifold, V, F, dropped volumes, pieces)."""
+    M = M.simplify(SLIVER_TOL_MM)
     dropped = []
     for _ in range(4):
         M, d = _drop_crumbs(M)

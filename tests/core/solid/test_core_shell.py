@@ -539,3 +539,25 @@ def test_topology_warning_counts_extra_tunnels():
     assert "1 more tunnel" in w and "Euler characteristic 0, 2 expected" in w
     (w,) = _topology_warnings(skin, two)
     assert "1 fewer tunnel" in w and "Euler characteristic 4, 2 expected" in w
+
+
+def test_clean_collapses_slivers_a_hair_off_the_surface():
+    """A cube whose top face is fanned from a vertex 1e-4 mm above it (the tiny triangles marching
+    cubes leaves near a lattice point): cleaning collapses that vertex, the volume stays."""
+    import manifold3d as m3
+
+    from bolus_addon.core.solid.manifold import from_manifold, to_manifold
+    from bolus_addon.core.solid.shell_checks import SLIVER_TOL_MM, _clean
+
+    V, F = from_manifold(m3.Manifold.cube([10.0, 10.0, 10.0]))
+    top = [i for i, f in enumerate(F) if np.all(V[f, 2] == 10.0)]
+    ring = list(np.nonzero(V[:, 2] == 10.0)[0])
+    c = len(V)
+    V = np.vstack([V, [5.0, 5.0, 10.0 + SLIVER_TOL_MM / 10]])
+    ring = sorted(ring, key=lambda v: np.arctan2(V[v, 1] - 5, V[v, 0] - 5))  # counter-clockwise seen from +z
+    F = np.vstack([np.delete(F, top, axis=0), [[ring[k], ring[(k + 1) % 4], c] for k in range(4)]])
+    M = to_manifold(V, F)
+    assert M.num_vert() == 9
+    M2, V2, F2, dropped, pieces = _clean(M)
+    assert len(V2) == 8 and pieces == 1 and not dropped
+    assert M2.volume() == pytest.approx(1000.0, abs=1e-6)
