@@ -155,7 +155,7 @@ def _collision(skin, others, t, c, res, M):
 def drop_border_ears(F, max_fraction=0.25):
     """(F' (m',3), dropped): the region without its border 'ears', triangles with two border
     edges.  A border cut along whole triangles zigzags (a saw of such teeth, finer than a voxel),
-    and the rim wall swept along that saw leaves tiny tunnels in the level set; without the teeth
+    and the rim wall swept along that saw leaves tiny tunnels in the meshed solid; without the teeth
     the border runs along the next row's edges.  One pass only (a smooth border has no ears, a
     region of a few triangles keeps them: nothing is dropped when more than `max_fraction` of the
     triangles are ears or when a vertex would be left with no triangle of the border's row)."""
@@ -179,7 +179,7 @@ def drop_border_ears(F, max_fraction=0.25):
 def _topology_warnings(skin, M) -> list[str]:
     """A warning when the solid's topology is not the region's thickened: a thickened surface S
     has Euler characteristic 2 chi(S) (a disk with h holes -> a solid with h tunnels), so a
-    difference counts tunnels the level set added (a border zigzagging along whole faces finer
+    difference counts tunnels the mesher added (a border zigzagging along whole faces finer
     than the resolution leaves tiny ones at the rim) or holes it closed over.  skin: the
     region's SkinDistance (its MeshTopology gives V - E + F); M: the solid (manifold3d's genus is
     1 - chi / 2 over the whole mesh)."""
