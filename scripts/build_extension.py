@@ -111,6 +111,13 @@ def staged_manifest(manifest: str, platforms: list[str], wheels: list[str]) -> s
     return head + "\n" + extra + sep + tail
 
 
+def builder_cli() -> Path:
+    """Blender's extension builder (blender_ext.py), shipped with Blender and with the bpy module."""
+    import bpy
+
+    return Path(bpy.utils.system_resource("SCRIPTS")) / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
+
+
 def shipped_files() -> list[str]:
     """The repository's files (relative POSIX paths) that the manifest's ``paths_exclude_pattern``
     lets into the extension, as Blender's own builder matches them (so the platform zips hold
@@ -118,10 +125,7 @@ def shipped_files() -> list[str]:
     import importlib.util
     import tomllib
 
-    import bpy
-
-    cli = Path(bpy.utils.system_resource("SCRIPTS")) / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
-    spec = importlib.util.spec_from_file_location("blender_ext_cli", cli)
+    spec = importlib.util.spec_from_file_location("blender_ext_cli", builder_cli())
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     manifest = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
@@ -362,9 +366,7 @@ def main() -> int:
     manifest = (ROOT / "blender_manifest.toml").read_text()
     (stage / "blender_manifest.toml").write_text(staged_manifest(manifest, args.platforms, wheels))
 
-    import bpy  # the builder ships with Blender (and with the bpy module)
-
-    cli = Path(bpy.utils.system_resource("SCRIPTS")) / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
+    cli = builder_cli()
     for old in out.glob("bolus-*.zip"):
         old.unlink()
     rc = subprocess.call([sys.executable, str(cli), "build", "--source-dir", str(stage), "--output-dir", str(out),

@@ -25,8 +25,8 @@ import build_extension  # noqa: E402
 
 
 def blender_ext_cli() -> Path:
-    bpy = pytest.importorskip("bpy")
-    cli = Path(bpy.utils.system_resource("SCRIPTS")) / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
+    pytest.importorskip("bpy")
+    cli = build_extension.builder_cli()
     if not cli.exists():
         pytest.skip(f"Blender's extension builder not found at {cli}")
     return cli
