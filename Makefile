@@ -41,6 +41,9 @@ PIP_INSTALL := -m pip install --quiet --disable-pip-version-check
 NO_PY313 := SKIPPED: the Blender 5.2.3 run (.venv52) -- no working Python 3.13 found (python3.13 on PATH, \
 pyenv's versions/3.13.*, /usr/local/bin, /usr/bin); install one or pass PYTHON313=/path/to/python3.13
 
+# The venvs `make test` needs are built side by side (pip downloads, one per venv).
+MAKEFLAGS += -j2
+
 .PHONY: demo pictures test test-core fuzz bench extension extension-wheels house operators-doc clean
 
 $(VENV)/.installed: requirements.txt
@@ -70,16 +73,14 @@ demo: $(VENV)/.installed
 pictures: $(VENV)/.installed
 	$(PY) scripts/readme_pictures.py --out docs/img
 
-# Every run goes ahead even when an earlier one failed; the target fails if any did.
+# The runs go two at a time on their own temporary folders (scripts/run_suites.py: two cores, so
+# the two whole suites take about as long as the slower one alone); every run goes ahead even when
+# another failed, each prints its log whole when it ends, and the target fails if any did.
 test: $(VENV)/.installed $(VENV45)/.installed $(VENV42)/.installed $(if $(PYTHON313),$(VENV52)/.installed)
-	@rc=0; \
-	echo "== Blender 5.0.1 (Python 3.11, numpy 1.26): whole suite"; $(PY) -m pytest tests || rc=1; \
-	if [ -n "$(PYTHON313)" ]; then \
-	  echo "== Blender 5.2.3 (Python 3.13, numpy 2): whole suite"; $(PY52) -m pytest tests || rc=1; \
-	else echo "$(NO_PY313)"; fi; \
-	echo "== Blender 4.5 LTS: smoke subset"; $(PY45) -m pytest tests -m smoke || rc=1; \
-	echo "== Blender 4.2 LTS: smoke subset"; $(PY42) -m pytest tests -m smoke || rc=1; \
-	exit $$rc
+	@$(if $(PYTHON313),,echo "$(NO_PY313)";) $(PY) scripts/run_suites.py --jobs 2 \
+	  "Blender 5.0.1 (Python 3.11, numpy 1.26): whole suite=$(PY)" \
+	  $(if $(PYTHON313),"Blender 5.2.3 (Python 3.13, numpy 2): whole suite=$(PY52)") \
+	  "Blender 4.5 LTS: smoke subset=$(PY45)" "Blender 4.2 LTS: smoke subset=$(PY42)" -- tests
 
 test-core: $(VENV)/.installed
 	$(PY) -m pytest tests -m "not blender"

@@ -12,8 +12,8 @@ The shell is the set where
   barycentrics), r = -(lateral distance of x from the border's normal line); elsewhere the
   foot's distance to the border, capped at a few voxels.  Hole borders get the same wall.
 
-Nearest triangles come from a KD-tree of sub-triangle centres (pieces of radius <= ``sub_radius``
-mm): exact, or farther than the true nearest by at most sub_radius.
+The nearest triangle comes from libigl's AABB tree (compiled, exact); Ericson's closest point on
+that one triangle then gives the barycentrics with exact zeros on edges and vertices.
 Arrays: V (n,3) float64 mm, F (m,3) int64, query points X (k,3).
 
 Design notes: docs/design/solid.md.
@@ -21,6 +21,7 @@ Design notes: docs/design/solid.md.
 from __future__ import annotations
 
 import numpy as np
+import igl  # the AABB tree: exact nearest triangles, compiled
 from scipy.spatial import cKDTree
 
 from ..mesh.boundary import boundary_loops
@@ -86,11 +87,11 @@ class SkinDistance:
     V (n,3), F (m,3) an open, consistently wound, non-degenerate region (checked by the
     caller).  Attributes: vn (n,3) unit area-weighted vertex normals, loops (list of border
     vertex loops, outer one first: the one enclosing the most area along the mean normal),
-    rim_tree (KD-tree of border samples every 0.05 mm), rmax (largest sub-triangle radius),
+    rim_tree (KD-tree of border samples every 0.05 mm), aabb (libigl's AABB tree of the triangles),
     area (float mm^2).
     """
 
-    def __init__(self, V, F, sub_radius: float = 1.0):
+    def __init__(self, V, F):
         self.V = V
         self.F = F
         self.topo = MeshTopology(V, F)
@@ -101,8 +102,7 @@ class SkinDistance:
         self._border()
         self._order_loops(fn.sum(axis=0))
         self._rim_samples()
-        self._triangle_trees(sub_radius)
-        self.kd_eps = 0.0
+        self._triangle_trees()
 
     def _normals(self) -> np.ndarray:
         """Sets area (mm^2), fn (m,3) unit face normals and vn (n,3) unit area-weighted vertex
@@ -172,89 +172,42 @@ class SkinDistance:
             self.rim_pts = np.full((1, 3), 1e12)
         self.rim_tree = cKDTree(self.rim_pts)
 
-    def _triangle_trees(self, sub_radius: float) -> None:
-        """KD-trees of the triangle centres (cent_tree: fast band tests far from the skin, where a
-        tree of a dense sheet is slow to query) and of sub-triangle centres (tree over sub_pts
-        (s,3), owner triangle sub_owner (s,)): each triangle split regularly into k^2 pieces of
-        radius <= sub_radius mm.  tri_rmax, rmax: the largest triangle and piece radius (mm)."""
+    def _triangle_trees(self) -> None:
+        """cent_tree: a KD-tree of the triangle centres (fast band tests far from the skin, where a
+        tree of a dense sheet is slow to query); aabb: libigl's AABB tree of the triangles for the
+        exact nearest point.  tri_rmax: the largest triangle radius about its centre (mm)."""
         A, B, C = self.A, self.B, self.C
         cent = (A + B + C) / 3.0
         rad = np.max(np.linalg.norm(np.stack([A, B, C]) - cent[None], axis=2), axis=0)
         self.cent = cent
         self.cent_tree = cKDTree(cent)
         self.tri_rmax = float(rad.max())
-        ks = np.maximum(1, np.ceil(rad / sub_radius)).astype(int)
-        pts, owner = [cent[ks == 1]], [np.nonzero(ks == 1)[0]]
-        radii = [rad[ks == 1]]
-        for k in np.unique(ks[ks > 1]):
-            sel = np.nonzero(ks == k)[0]
-            # centres of the k^2 sub-triangles of a regular split
-            ij = [(i, j) for i in range(k) for j in range(k - i)]
-            bc = [((i + 1 / 3) / k, (j + 1 / 3) / k) for i, j in ij] + \
-                 [((i + 2 / 3) / k, (j + 2 / 3) / k) for i, j in ij if i + j < k - 1]
-            bc = np.array(bc)
-            u, v = bc[:, 0], bc[:, 1]
-            w = 1 - u - v
-            P = (A[sel][:, None] * w[None, :, None] + B[sel][:, None] * u[None, :, None]
-                 + C[sel][:, None] * v[None, :, None])
-            pts.append(P.reshape(-1, 3))
-            owner.append(np.repeat(sel, len(bc)))
-            radii.append(np.repeat(rad[sel] / k, len(bc)) * 1.0001)
-        self.sub_pts = np.concatenate(pts)
-        self.sub_owner = np.concatenate(owner)
-        self.rmax = float(np.concatenate(radii).max())
-        self.tree = cKDTree(self.sub_pts, leafsize=32, balanced_tree=False, compact_nodes=False)
+        self._Vc = np.ascontiguousarray(self.V, dtype=np.float64)
+        self._Fc = np.ascontiguousarray(self.F, dtype=np.int64)
+        self.aabb = igl.AABB()
+        self.aabb.init(self._Vc, self._Fc)
 
     # ------------------------------------------------------------------ nearest
-    def _best_of(self, X, cand, skip=None):
-        """Best of candidate triangles cand (k, j) for points X (k,3); skip (k, j) bool: entries
-        not to evaluate (repeats)."""
-        best = np.full(len(X), np.inf)
-        bq = np.zeros((len(X), 3))
-        bf = np.zeros(len(X), dtype=np.int64)
-        bb = np.zeros((len(X), 3))
-        for j in range(cand.shape[1]):
-            rows = np.arange(len(X)) if skip is None else np.nonzero(~skip[:, j])[0]
-            if len(rows) == 0:
-                continue
-            f = cand[rows, j]
-            x = X[rows]
-            q, u, v, w = closest_on_triangles(x, self.A[f], self.B[f], self.C[f])
-            dd = np.linalg.norm(x - q, axis=1)
-            better = dd < best[rows]
-            if not better.any():
-                continue
-            r = rows[better]
-            best[r] = dd[better]
-            bq[r] = q[better]
-            bf[r] = f[better]
-            bb[r] = np.stack([u[better], v[better], w[better]], axis=1)
-        return best, bq, bf, bb
-
-    def nearest(self, X, k: int = 12, chunk: int = 100_000):
+    def nearest(self, X, chunk: int = 200_000):
         """Nearest skin point of X (k,3): distance (k,), foot (k,3), face (k,), barycentrics (k,3).
 
-        The candidates are the triangles of the k nearest sub-triangle centres.  The distance
-        found is exact or too large by at most the sub-radius (the true foot's piece has its
-        centre within sub_radius of the foot), and by about sub_radius^2 / (2 d) at a distance
-        d above a smooth patch: 0.0125 mm at the outer face for t = 10 mm, resolution 0.5 mm."""
-        X = np.asarray(X, dtype=np.float64).reshape(-1, 3)
+        Exact: the face from the AABB tree, the foot and barycentrics from Ericson's closest point
+        on it (on an edge or a vertex the other coordinates are exactly 0, which `terms` uses for
+        the sign and the rim)."""
+        X = np.ascontiguousarray(np.asarray(X, dtype=np.float64).reshape(-1, 3))
         n = len(X)
         D = np.empty(n)
         Q = np.empty((n, 3))
         FI = np.empty(n, dtype=np.int64)
         BC = np.empty((n, 3))
-        kk = min(k, len(self.sub_pts))
         for s in range(0, n, chunk):
             x = X[s:s + chunk]
-            _, ci = self.tree.query(x, k=kk, eps=self.kd_eps, workers=2)
-            cand = self.sub_owner[ci.reshape(len(x), -1)]
-            # each owner once (sorted per row; repeats are skipped)
-            cand = np.sort(cand, axis=1)
-            rep = np.zeros(cand.shape, dtype=bool)
-            rep[:, 1:] = cand[:, 1:] == cand[:, :-1]
-            best, bq, bf, bb = self._best_of(x, cand, rep)
-            D[s:s + chunk], Q[s:s + chunk], FI[s:s + chunk], BC[s:s + chunk] = best, bq, bf, bb
+            _, f, _ = self.aabb.squared_distance(self._Vc, self._Fc, x)
+            f = np.asarray(f, dtype=np.int64)
+            q, u, v, w = closest_on_triangles(x, self.A[f], self.B[f], self.C[f])
+            D[s:s + chunk] = np.linalg.norm(x - q, axis=1)
+            Q[s:s + chunk], FI[s:s + chunk] = q, f
+            BC[s:s + chunk] = np.stack([u, v, w], axis=1)
         return D, Q, FI, BC
 
     # ------------------------------------------------------------------ field

@@ -2,8 +2,8 @@
 it (exact only where it decides the surface) and its zero surface.
 
 The field is positive inside the solid (see distance_field).  By default it is sampled on one
-cubic lattice and meshed by `marching.marching_manifold` (libigl's compiled marching cubes on
-the cubes the surface crosses).  The peer, manifold3d's level set, takes a per-point Python
+cubic lattice, exact on the corners of the cubes the surface crosses (`narrow_band`), and meshed
+by `marching.marching_manifold` (libigl's compiled marching cubes on those cubes).  The peer, manifold3d's level set, takes a per-point Python
 callable only, so for it the field is computed beforehand on exactly the points it asks for
 (the body-centred cubic grid of manifold's sdf.cpp) and the callback just looks them up.
 """
@@ -17,6 +17,7 @@ import manifold3d as m3
 
 from ..errors import BolusError
 from .marching import marching_manifold
+from .narrow_band import field_narrow_band
 
 __all__ = ["_Grid", "_coarse_terms", "_field_coarse_to_fine", "_level_set_fast", "_tight_box",
            "_solid_on_grid", "_progress"]
@@ -188,17 +189,21 @@ def _solid_on_grid(skin, grid, t, c, progress, stats, mesher: str = "cubes"):
     T0 = time.process_time()
     rim_cap = 3.0 * float(grid.sp.max())
     band = t + 3.0 * float(grid.sp.max()) + skin.tri_rmax
-    coarse = _coarse_terms(skin, grid, t, c, band)
     lattices = (0, 1) if mesher == "level_set" else (0,)
     p_mid = 0.55 if mesher == "level_set" else 0.45
-    step = (p_mid - 0.05) / len(lattices)
-    fields, n_exact = [], 0
-    for i, lattice in enumerate(lattices):
-        f, n = _field_coarse_to_fine(skin, grid, lattice, t, c, rim_cap, band, coarse, progress,
-                                     0.05 + i * step, 0.05 + (i + 1) * step)
-        fields.append(f)
-        n_exact += n
-    del coarse
+    if mesher == "cubes":
+        f, n_exact = field_narrow_band(skin, grid, t, c, rim_cap, progress, 0.05, p_mid)
+        fields = [f]
+    else:
+        coarse = _coarse_terms(skin, grid, t, c, band)
+        step = (p_mid - 0.05) / len(lattices)
+        fields, n_exact = [], 0
+        for i, lattice in enumerate(lattices):
+            f, n = _field_coarse_to_fine(skin, grid, lattice, t, c, rim_cap, band, coarse, progress,
+                                         0.05 + i * step, 0.05 + (i + 1) * step)
+            fields.append(f)
+            n_exact += n
+        del coarse
     stats["exact_points"] = stats.get("exact_points", 0) + n_exact
     stats["grid_points"] = stats.get("grid_points", 0) + sum(
         int(np.prod(grid.shape0 if lattice == 0 else grid.shape1)) for lattice in lattices)

@@ -276,6 +276,30 @@ def test_field_bounds_agree_with_the_exact_field_at_a_folded_border():
         assert np.array_equal(f > 0, exact > 0)
 
 
+def test_narrow_band_field_is_exact_on_every_crossing_cube():
+    """The levelled narrow band (core.solid.narrow_band) at the folded border of the curled
+    sheet: every lattice point carries the exact field's sign, every cube the exact surface
+    crosses has its eight corners at the exact value, and far fewer points were evaluated."""
+    import bolus_addon.core.solid.shell as S
+    from bolus_addon.core.solid.marching import CUBE_CORNERS, crossing_cubes
+    from bolus_addon.core.solid.narrow_band import field_narrow_band
+
+    V, F = curled_sheet()
+    for t, c, res in ((5.0, 0.0, 0.5), (6.0, 1.0, 1.0)):
+        skin = SkinDistance(V, F)
+        g = S._Grid(V.min(axis=0) - t - 3 * res, V.max(axis=0) + t + 3 * res, res)
+        rim_cap = 3 * g.sp.max()
+        f, n_exact = field_narrow_band(skin, g, t, c, rim_cap)
+        f = f[1:-1, 1:-1, 1:-1]
+        P = np.stack(np.meshgrid(*g.axes(0), indexing="ij"), -1).reshape(-1, 3)
+        exact = skin.field(P, t, c, rim_cap).reshape(f.shape)
+        assert np.array_equal(f > 0, exact > 0)
+        cubes = crossing_cubes(exact > 0)
+        corner = tuple((cubes[:, None, :] + CUBE_CORNERS[None]).reshape(-1, 3).T)
+        assert len(cubes) > 100 and np.allclose(f[corner], exact[corner], atol=1e-9, rtol=0)
+        assert n_exact < 0.5 * f.size
+
+
 def test_hole_on_a_curved_region_cuts_only_its_channel():
     """A hole wrapping 60 degrees around a cylinder of radius 30 mm (a far from planar loop, like
     a nostril rim): the channel follows the surface's normals, so the shell stays one piece
