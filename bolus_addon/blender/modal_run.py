@@ -18,6 +18,7 @@ from __future__ import annotations
 import threading
 import traceback
 
+from ..core.budget import Deadline, budget_s
 from ..core.errors import BolusError
 
 #: seconds between two timer ticks of a threaded modal run (progress bar, "done?")
@@ -42,7 +43,8 @@ class Worker:
     The progress callback only records (fraction, text) under a lock, and raises
     `Cancelled` once `cancel` was set: no bpy call happens in the thread."""
 
-    def __init__(self, compute, job):
+    def __init__(self, compute, job, deadline=None):
+        self.deadline = deadline  # progress -> the callback compute gets (the time limit's wrapper)
         self.lock = threading.Lock()
         self.fraction, self.text = 0.0, ""
         self.cancel = threading.Event()
@@ -70,7 +72,8 @@ class Worker:
 
     def _main(self, compute, job) -> None:
         try:
-            self.result = compute(job, self.progress)
+            progress = self.progress if self.deadline is None else self.deadline(self.progress)
+            self.result = compute(job, progress)
         except Cancelled:
             self.cancelled = True
         except BaseException as exc:  # carried back to the main thread, reported there
@@ -116,7 +119,8 @@ class ModalRun:
         self._source_name = obj.name if obj is not None else "the mesh"
         self._source_size = mesh_size(obj)
         self._job = job
-        self._worker = Worker(type(self).compute, job)
+        limit, what = budget_s(time_limit_of(context)), self.bl_label  # read here: no bpy in the thread
+        self._worker = Worker(type(self).compute, job, lambda progress: Deadline(progress, limit, what))
         self.start_modal(context, MODAL_PERIOD_S)
         self._worker.start()
         status_text(context, f"{self.bl_label}: starting (Esc to cancel)")
@@ -149,6 +153,13 @@ class ModalRun:
             raise BolusError(f"'{self._source_name}' changed while {self.bl_label} was computing: nothing was "
                              "written; run it again")
         return self.finish(context, self._job, worker.result)
+
+
+def time_limit_of(context) -> float | None:
+    """The user's time limit in seconds (the sidebar's *Time limit (s)*, 0 = none) for core.budget;
+    None (the default budget) when the scene has no Bolus settings."""
+    settings = getattr(getattr(context, "scene", None), "bolus", None)
+    return None if settings is None else float(settings.time_limit_s)
 
 
 def mesh_size(obj) -> tuple | None:

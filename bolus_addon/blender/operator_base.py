@@ -14,7 +14,9 @@ exception (its traceback on the console), becomes ``self.report({'ERROR'}, ...)`
 - ``finish(context, job, result) -> {'FINISHED'}`` (main thread): write objects, attributes, report.
 
 ``execute`` runs the three in the main thread (progress lines on stdout in background runs);
-``invoke`` from the sidebar runs `compute` in a worker thread (`modal_run`).
+``invoke`` from the sidebar runs `compute` in a worker thread (`modal_run`).  Either way the
+progress callback carries the user's time limit (`deadline`): past it the job stops with an
+ERROR saying how far it got, nothing written.
 
 Design notes: docs/design/blender.md.
 """
@@ -26,7 +28,8 @@ import traceback
 
 import bpy
 from . import mesh_region
-from .modal_run import ModalRun, quietly
+from .modal_run import ModalRun, quietly, time_limit_of
+from ..core.budget import Deadline, budget_s
 from ..core.errors import BolusError
 from ..core.mesh.topology import MeshTopology
 
@@ -97,7 +100,12 @@ class BolusOperator(ModalRun):
         job = self.prepare(context)
         if isinstance(job, set):
             return job
-        return self.finish(context, job, self.compute(job, self.progress))
+        return self.finish(context, job, self.compute(job, self.deadline(context, self.progress)))
+
+    def deadline(self, context, progress=None) -> Deadline:
+        """``progress`` wrapped in the user's time limit (`core.budget.Deadline`): the job stops at
+        its first progress call past the limit with `TimeLimitReached`, nothing written."""
+        return Deadline(progress, budget_s(time_limit(context)), self.bl_label)
 
     def execute(self, context):
         wm = self._progress_start(context)
@@ -159,11 +167,7 @@ class BolusOperator(ModalRun):
             self.report({"WARNING"}, msg)
 
 
-def time_limit(context) -> float | None:
-    """The user's time limit in seconds (the sidebar's *Time limit (s)*, 0 = none) for core.budget;
-    None (the default budget) when the scene has no Bolus settings."""
-    settings = getattr(getattr(context, "scene", None), "bolus", None)
-    return None if settings is None else float(settings.time_limit_s)
+time_limit = time_limit_of  # the operators' name for it
 
 
 def operator_name(op) -> str:

@@ -246,9 +246,10 @@ def exclude_cavities_property(**kw):
 
 
 def time_limit_property(**kw):
-    return FloatProperty(name="Time limit (s)", description="A step estimated (from the mesh size, before it starts) to "
-                         "take longer than this is refused with what to do instead (select a smaller area, decimate, a "
-                         "coarser resolution); 0: no limit, every step runs to the end (Esc cancels it from the sidebar)",
+    return FloatProperty(name="Time limit (s)", description="A long step stops at this limit with nothing changed "
+                         "(and says how far it got); one that cannot fit in it at all (its least time, estimated from "
+                         "the mesh size) is refused before it starts with what to do instead (a smaller area, Decimate, "
+                         "a coarser resolution); 0: no limit (Esc cancels a step from the sidebar)",
                          default=60.0, min=0.0, soft_max=600.0, step=1000, precision=0, **kw)
 
 

@@ -233,8 +233,9 @@ class BOLUS_OT_improve_flattenability(BolusOperator, bpy.types.Operator):
 
     def run(self, context):
         run = self._start(context)
+        deadline = self.deadline(context, self.progress)  # past the time limit: an ERROR, nothing written
         while run.job.step():
-            self.progress(run.job.fraction, run.job.text)
+            deadline(run.job.fraction, run.job.text)
         return self.finish(context, run, run.job.result())
 
     def finish(self, context, run: _ImproveRun, res):
@@ -250,6 +251,7 @@ class BOLUS_OT_improve_flattenability(BolusOperator, bpy.types.Operator):
     # both: errors become reports (abort() first for modal), no window falls back to execute.
     def invoke(self, context, event):
         self._run = self._start(context)
+        self._deadline = self.deadline(context)
         self.start_modal(context)
         self.report({"INFO"}, f"Improving flattenability ({self.method}, max gap {self.max_gap_mm:g} mm; "
                               "Esc keeps the best so far)")
@@ -264,6 +266,7 @@ class BOLUS_OT_improve_flattenability(BolusOperator, bpy.types.Operator):
             return {"RUNNING_MODAL"}
         more = job.step()
         self.progress(job.fraction, job.text)
+        self._deadline(job.fraction, job.text)  # past the time limit: an ERROR (abort first), nothing written
         if more:
             return {"RUNNING_MODAL"}
         self.abort(context)

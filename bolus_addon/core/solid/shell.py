@@ -28,7 +28,7 @@ import numpy as np
 import manifold3d as m3
 
 from .distance_field import SkinDistance
-from ..budget import check_grid_budget, grid_resolution_for_budget
+from ..budget import Deadline, budget_s, check_grid_budget, grid_resolution_for_budget
 from ..errors import BolusError
 from .grid import _coarse_terms, _field_coarse_to_fine, _Grid, _level_set_fast, _progress, _solid_on_grid, _tight_box
 from .manifold import SIDE_INNER, SIDE_OUTER, SIDE_RIM, from_manifold, ray_thickness, to_manifold
@@ -131,7 +131,8 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     this distance (mm, 0 = on the skin); resolution: voxel size (mm) of the field's lattice.
     others: (V2 (k,3), F2 (j,3)) the rest of the skin or None: `BolusError` naming the spot if
     the shell would run into it.  time_limit_s: the user's time limit (core.budget; None: the
-    default budget, 0: none): a wall estimated to take longer is refused before the work.
+    default budget, 0: none): a wall that cannot fit (its lower bound over the limit) is refused
+    before the work, any other stops at the limit (`budget.TimeLimitReached`).
     Every border loop but the outer one (enclosing the most area seen along the region's mean
     normal) is a hole, kept open through the solid.  mesher: "cubes" (marching cubes) or
     "level_set" (manifold3d's level set, the slower peer of the benchmarks; `grid.MESHERS`).
@@ -144,6 +145,9 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     stats: dict = {}
     T0 = time.process_time()
     _check_size(V, F, t, c, res, others, time_limit_s)
+    if _saw_retry:
+        progress = Deadline(progress, budget_s(time_limit_s), "Make Bolus",
+                            "choose a coarser resolution or select a smaller region")
     skin = SkinDistance(V, F)
     check_shell_request(t, c, res, skin.area)
     _check_region(skin)
