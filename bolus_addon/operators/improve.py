@@ -266,7 +266,9 @@ class BOLUS_OT_improve_flattenability(BolusOperator, bpy.types.Operator):
             return {"RUNNING_MODAL"}
         more = job.step()
         self.progress(job.fraction, job.text)
-        self._deadline(job.fraction, job.text)  # past the time limit: an ERROR (abort first), nothing written
+        deadline = getattr(self, "_deadline", None)  # set by invoke
+        if deadline is not None:
+            deadline(job.fraction, job.text)  # past the time limit: an ERROR (abort first), nothing written
         if more:
             return {"RUNNING_MODAL"}
         self.abort(context)

@@ -214,7 +214,7 @@ def _solid_on_grid(skin, grid, t, c, progress, stats, mesher: str = "cubes"):
     _progress(progress, p_mid, "marching cubes" if mesher == "cubes" else "level set")
     T1 = time.process_time()
     if mesher == "cubes":
-        M = marching_manifold(fields[0], grid.lo - grid.sp, grid.sp)
+        M = marching_manifold(fields[0], grid.lo, grid.sp, pad=True)
     else:
         M = _level_set_fast(grid, *fields)
     del fields

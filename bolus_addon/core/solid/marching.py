@@ -43,30 +43,40 @@ def crossing_cubes(inside: np.ndarray, chunk: int = 64) -> np.ndarray:
     return np.concatenate(out) if out else np.zeros((0, 3), dtype=np.int64)
 
 
-def marching_cubes(values: np.ndarray, origin, spacing):
+def marching_cubes(values: np.ndarray, origin, spacing, pad: bool = False):
     """Surface {values = 0} of a lattice (nx, ny, nz), positive inside: (V (n,3), F (m,3)) with
-    the lattice point (i, j, k) at origin + (i, j, k) * spacing (mm), faces wound outward."""
+    the lattice point (i, j, k) at origin + (i, j, k) * spacing (mm), faces wound outward.
+    pad: the lattice is taken as surrounded by one layer of -1 (no copy of it is made), so the
+    surface closes at its box."""
     import igl  # the compiled marching cubes (libigl)
 
-    f = np.where(values == 0.0, -1e-12, values)
-    cubes = crossing_cubes(f > 0)
+    inside = values > 0  # a corner exactly on the surface counts as outside (nudged below)
+    if pad:
+        inside = np.pad(inside, 1)
+    cubes = crossing_cubes(inside)
+    del inside
     if len(cubes) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
-    ny, nz = f.shape[1], f.shape[2]
+    shape = np.array(values.shape) + (2 if pad else 0)
+    ny, nz = int(shape[1]), int(shape[2])
     corner = cubes[:, None, :] + CUBE_CORNERS[None]                      # (k, 8, 3)
     gid = (corner[..., 0] * ny + corner[..., 1]) * nz + corner[..., 2]   # (k, 8)
     used, inv = np.unique(gid, return_inverse=True)
     GI = inv.reshape(gid.shape).astype(np.int64)
     i, rem = np.divmod(used, ny * nz)
     j, k = np.divmod(rem, nz)
-    GV = np.asarray(origin, dtype=np.float64) + np.stack([i, j, k], axis=1) * np.asarray(spacing, dtype=np.float64)
-    S = np.ascontiguousarray(f.ravel()[used], dtype=np.float64)
-    res = igl.marching_cubes(S, GV, GI, 0.0)  # (V, F[, E2V]): libigl 2.6.3 adds the edge map
+    ijk = np.stack([i, j, k], axis=1) - (1 if pad else 0)
+    real = np.all((ijk >= 0) & (ijk < np.array(values.shape)), axis=1)
+    S = np.full(len(used), -1.0)
+    S[real] = values[tuple(ijk[real].T)]
+    S[S == 0.0] = -1e-12
+    GV = np.asarray(origin, dtype=np.float64) + ijk * np.asarray(spacing, dtype=np.float64)
+    res = igl.marching_cubes(np.ascontiguousarray(S), GV, GI, 0.0)  # (V, F[, E2V]): libigl 2.6.3 adds the edge map
     V, F = np.asarray(res[0], dtype=np.float64), np.asarray(res[1], dtype=np.int64)
     return V, np.ascontiguousarray(F[:, ::-1])  # libigl winds {S > 0} inward
 
 
-def marching_manifold(values: np.ndarray, origin, spacing) -> m3.Manifold:
+def marching_manifold(values: np.ndarray, origin, spacing, pad: bool = False) -> m3.Manifold:
     """`marching_cubes` as a manifold3d Manifold (empty when the surface is empty)."""
-    V, F = marching_cubes(values, origin, spacing)
+    V, F = marching_cubes(values, origin, spacing, pad)
     return to_manifold(V, F, "the marched solid")

@@ -19,8 +19,8 @@ crossing: a feature smaller than a coarse spacing that the coarser levels did no
 Unlike a Lipschitz bound this asks nothing of the rim term (which jumps where border normals
 cross), and it evaluates about the two layers of points per face that marching cubes reads.
 
-Arrays: level values flat (C order) float64; the fine lattice is `grid._Grid`'s lattice 0 and
-is returned (nx+2, ny+2, nz+2), padded by one layer of -1.
+Arrays: level values flat (C order) float64; the fine lattice is `grid._Grid`'s lattice 0,
+returned (nx, ny, nz) (`marching.marching_cubes(pad=True)` closes the surface at its box).
 """
 from __future__ import annotations
 
@@ -166,7 +166,7 @@ def _on_coarse(shape):
 
 def field_narrow_band(skin, grid, t, c, rim_cap, progress=None, p0=0.0, p1=1.0):
     """The field `SkinDistance.field(., t, c, rim_cap)` on `grid`'s lattice 0 (module docstring):
-    (values (nx+2, ny+2, nz+2) padded by one layer of -1, number of points evaluated exactly)."""
+    (values (nx, ny, nz), number of points evaluated exactly)."""
     fine = _Level(skin, grid.lo, grid.sp, grid.shape0, (t, c, rim_cap))
     chain = [fine]
     for _ in range(level_count(fine.h, t - c)):
@@ -176,9 +176,7 @@ def field_narrow_band(skin, grid, t, c, rim_cap, progress=None, p0=0.0, p1=1.0):
         _progress(progress, p0 + (p1 - p0) * (len(chain) - 1 - k) / len(chain), "distance field")
         _refine(chain[k], chain[k + 1])
     _progress(progress, p1, "distance field")
-    padded = np.full(tuple(x + 2 for x in fine.shape), -1.0)
-    padded[1:-1, 1:-1, 1:-1] = fine.vals.reshape(fine.shape)
-    return padded, sum(lv.evaluated for lv in chain)
+    return fine.vals.reshape(fine.shape), sum(lv.evaluated for lv in chain)
 
 
 def _progress(progress, frac, text):

@@ -52,7 +52,8 @@ __all__ = ["Shell", "check_shell_request", "make_shell", "MAX_THICKNESS_MM", "MA
 MAX_THICKNESS_MM = 50.0
 #: voxels the wall (thickness - clearance) must span at least
 MIN_VOXELS_ACROSS = 4
-#: lattice points of the field (both lattices) above which the request is refused (memory)
+#: lattice points of the field (the ones the mesher reads: one lattice for marching cubes, both for the
+#: level set) above which the request is refused: about 11 bytes each at the peak (values, flags, masks)
 MAX_GRID_POINTS = 120_000_000
 
 
@@ -144,7 +145,7 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     _progress(progress, 0.0, "preparing the region")
     stats: dict = {}
     T0 = time.process_time()
-    _check_size(V, F, t, c, res, others, time_limit_s)
+    _check_size(V, F, t, c, res, others, time_limit_s, mesher)
     if _saw_retry:
         progress = Deadline(progress, budget_s(time_limit_s), "Make Bolus",
                             "choose a coarser resolution or select a smaller region")
@@ -187,7 +188,7 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
                  stats=stats)
 
 
-def _check_size(V, F, t, c, res, others, time_limit_s) -> None:
+def _check_size(V, F, t, c, res, others, time_limit_s, mesher="cubes") -> None:
     """Refuse, before any work, a region whose grid (its box grown by t + 3 res, voxel res mm)
     has over MAX_GRID_POINTS points or whose wall t - c mm is estimated to take longer than the
     time budget (`budget.check_grid_budget`); the message advises a resolution that fits both."""
@@ -196,11 +197,12 @@ def _check_size(V, F, t, c, res, others, time_limit_s) -> None:
     size = V.max(axis=0) - V.min(axis=0)
     area = 0.5 * float(np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum())
     read = len(F) + (0 if others is None else len(others[1]))  # triangles the operator reads and checks
-    if grid.points > MAX_GRID_POINTS:  # the resolution advised also fits the time budget
-        coarse = max(res * (grid.points / MAX_GRID_POINTS) ** (1 / 3),
+    points = int(np.prod(grid.shape0)) if mesher == "cubes" else grid.points  # the lattices the mesher reads
+    if points > MAX_GRID_POINTS:  # the resolution advised also fits the time budget
+        coarse = max(res * (points / MAX_GRID_POINTS) ** (1 / 3),
                      grid_resolution_for_budget(area, t - c, res, read, time_limit_s)[2] or 0.0)
         raise BolusError(
-            f"the region ({size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm) needs {grid.points / 1e6:.0f} million "
+            f"the region ({size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm) needs {points / 1e6:.0f} million "
             f"grid points at {res:g} mm, more than the budget of {MAX_GRID_POINTS / 1e6:.0f} million: choose a "
             f"resolution of {coarse:.2g} mm or coarser, or a smaller region")
     check_grid_budget(area, t - c, res, MIN_VOXELS_ACROSS,  # refuse now, not after minutes
