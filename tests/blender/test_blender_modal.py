@@ -347,11 +347,12 @@ class CallWatch:
 
     def not_bpy_free(self, module_file: str) -> list:
         """The calls a bpy-free compute must not make: any Blender-layer function of the add-on
-        other than compute and its lambdas, the Worker's progress, and the two bpy-free helpers."""
+        other than compute and its lambdas, the Worker's progress and its time-limit lambda (a core
+        Deadline), and the two bpy-free helpers."""
         worker, solid_split, labels, part_checks, unfold = (
             "blender/modal_run.py", "blender/solid_split.py", "blender/labels.py", "blender/part_checks.py",
             "operators/unfold.py")
-        allowed = {(worker, "progress"), (worker, "_main"), (module_file, "compute"),
+        allowed = {(worker, "progress"), (worker, "_main"), (worker, "<lambda>"), (module_file, "compute"),
                    (module_file, "<lambda>"), (solid_split, "compute_solid"),
                    (solid_split, "<lambda>"), (labels, "engrave_with"),
                    (part_checks, "part_arrays"), (solid_split, "<genexpr>"),

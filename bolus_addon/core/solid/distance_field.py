@@ -27,7 +27,14 @@ from scipy.spatial import cKDTree
 from ..mesh.boundary import boundary_loops
 from ..mesh.topology import MeshTopology, corner_angles
 
-__all__ = ["closest_on_triangles", "SkinDistance"]
+__all__ = ["closest_on_triangles", "SkinDistance", "HOLE_FRACTION"]
+
+#: a border loop other than the outer one is a HOLE (a channel is cut through the bolus) when its
+#: membrane's vector area is under this fraction of the largest loop's: a nostril, an eye, a
+#: stoma; otherwise it is an END, open like the outer rim: the far end of a sleeve round a knee
+#: or an elbow, whose two loops span about the same area (a vector area needs no plane: it is
+#: the same for every surface the loop bounds, and a tube's two ends cancel in the sum)
+HOLE_FRACTION = 0.2
 
 
 def closest_on_triangles(p, a, b, c):
@@ -147,7 +154,9 @@ class SkinDistance:
     def _order_loops(self, mean_n) -> None:
         """loops, loop_lengths (mm), loop_areas (mm^2): the border loops, outer one first.  The
         outer loop encloses the most area seen along the region's mean normal mean_n (3,) (the
-        longest loop is not it where a border zigzags along whole faces: a dome's cut top)."""
+        longest loop is not it where a border zigzags along whole faces: a dome's cut top).
+        hole_loops / end_loops: the other loops split by `HOLE_FRACTION` of their membranes'
+        vector areas (membrane_areas, mm^2)."""
         V = self.V
         loops = boundary_loops(self.F, self.topo)
         lengths = [float(np.linalg.norm(V[lp] - V[np.roll(lp, -1)], axis=1).sum()) for lp in loops]
@@ -157,6 +166,12 @@ class SkinDistance:
         self.loops = [loops[i] for i in order]
         self.loop_lengths = [lengths[i] for i in order]
         self.loop_areas = [enclosed[i] for i in order]
+        # the membrane's vector area of each loop (the same for every surface spanning it)
+        membrane = [float(np.linalg.norm(np.cross(V[lp], V[np.roll(lp, -1)]).sum(axis=0))) / 2 for lp in self.loops]
+        self.membrane_areas = membrane
+        big = max(membrane, default=0.0)
+        self.hole_loops = [lp for lp, a in zip(self.loops[1:], membrane[1:]) if a < HOLE_FRACTION * big]
+        self.end_loops = [lp for lp, a in zip(self.loops[1:], membrane[1:]) if a >= HOLE_FRACTION * big]
 
     def _rim_samples(self) -> None:
         """rim_pts (s,3): the border edges sampled every 0.05 mm (one far point when the region

@@ -135,7 +135,9 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     default budget, 0: none): a wall that cannot fit (its lower bound over the limit) is refused
     before the work, any other stops at the limit (`budget.TimeLimitReached`).
     Every border loop but the outer one (enclosing the most area seen along the region's mean
-    normal) is a hole, kept open through the solid.  mesher: "cubes" (marching cubes) or
+    normal) is a hole, kept open through the solid by a channel, unless its membrane spans about as
+    much as the largest loop's (`distance_field.HOLE_FRACTION`): then it is an end, open like the
+    outer rim (a sleeve's two ends).  mesher: "cubes" (marching cubes) or
     "level_set" (manifold3d's level set, the slower peer of the benchmarks; `grid.MESHERS`).
     Returns a `Shell`.
     """
@@ -155,7 +157,7 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     warnings: list[str] = []
     M = _solid_in_box(skin, V, t, c, res, progress, stats, mesher)
     T1 = time.process_time()
-    holes = skin.loops[1:]
+    holes = skin.hole_loops  # ends (a sleeve's far end) stay open without a channel
     M = _cut_holes(skin, M, holes, t, res, progress, warnings)
     T2 = time.process_time()
     stats["holes_s"] = T2 - T1

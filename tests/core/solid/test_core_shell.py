@@ -584,3 +584,26 @@ def test_clean_collapses_slivers_a_hair_off_the_surface():
     M2, V2, F2, dropped, pieces = _clean(M)
     assert len(V2) == 8 and pieces == 1 and not dropped
     assert M2.volume() == pytest.approx(1000.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("name", ["makehuman_elbow_patch.obj", "makehuman_knee_patch.obj"])
+def test_a_sleeve_keeps_both_ends_open_and_whole(name, monkeypatch):
+    """A ring of skin round an elbow or a knee: its two loops span about the same membrane, so
+    both are ends, not holes: the sleeve is one closed ring (genus 1) of the full wall, its
+    volume about area x thickness.  Taking the far end for a hole (the rule for a loop the
+    outer one dwarfs) cuts a channel through the sleeve and loses material."""
+    from paths import data_mesh
+    from bolus_addon.core.mesh.objfile import load_obj
+    import bolus_addon.core.solid.distance_field as DF
+
+    V, F, _ = load_obj(data_mesh(name), 100.0)  # dm -> mm
+    skin = SkinDistance(V, F)
+    assert len(skin.loops) == 2 and len(skin.end_loops) == 1 and not skin.hole_loops
+    t, res = 8.0, 2.0
+    sh = make_shell(V, F, t, 0.0, res, time_limit_s=0)
+    rep = closed_report(sh.V, sh.F)
+    assert sh.holes == 0 and rep["closed"] and rep["components"] == 1 and rep["genus"] == 1
+    assert 0.85 * skin.area * t < sh.volume_mm3 < 1.3 * skin.area * t
+    monkeypatch.setattr(DF, "HOLE_FRACTION", 1e9)  # every loop but the outer one a hole
+    cut = make_shell(V, F, t, 0.0, res, time_limit_s=0)
+    assert cut.holes == 1 and cut.volume_mm3 < 0.99 * sh.volume_mm3
