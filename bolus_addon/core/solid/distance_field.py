@@ -27,14 +27,17 @@ from scipy.spatial import cKDTree
 from ..mesh.boundary import boundary_loops
 from ..mesh.topology import MeshTopology, corner_angles
 
-__all__ = ["closest_on_triangles", "SkinDistance", "HOLE_FRACTION"]
+__all__ = ["closest_on_triangles", "SkinDistance", "HOLE_FRACTION", "ACROSS_COS"]
 
-#: a border loop other than the outer one is a HOLE (a channel is cut through the bolus) when its
-#: membrane's vector area is under this fraction of the largest loop's: a nostril, an eye, a
-#: stoma; otherwise it is an END, open like the outer rim: the far end of a sleeve round a knee
-#: or an elbow, whose two loops span about the same area (a vector area needs no plane: it is
-#: the same for every surface the loop bounds, and a tube's two ends cancel in the sum)
+#: a border loop other than the outer one is an END, open like the outer rim, when both hold:
+#: its membrane's vector area is at least HOLE_FRACTION of the largest loop's, and the skin
+#: stands across that membrane (the mean |n . m| of the skin's vertex normals n along the loop
+#: against the membrane's unit vector area m is under ACROSS_COS): the far end of a sleeve round
+#: a knee or an elbow.  Every other loop is a HOLE (a channel is cut through the bolus): a
+#: nostril, an eye, a stoma, the top of a dome cut open, where the skin would run on over the
+#: membrane.  (A vector area needs no plane: it is the same for every surface the loop bounds.)
 HOLE_FRACTION = 0.2
+ACROSS_COS = 0.5
 
 
 def closest_on_triangles(p, a, b, c):
@@ -155,8 +158,8 @@ class SkinDistance:
         """loops, loop_lengths (mm), loop_areas (mm^2): the border loops, outer one first.  The
         outer loop encloses the most area seen along the region's mean normal mean_n (3,) (the
         longest loop is not it where a border zigzags along whole faces: a dome's cut top).
-        hole_loops / end_loops: the other loops split by `HOLE_FRACTION` of their membranes'
-        vector areas (membrane_areas, mm^2)."""
+        hole_loops / end_loops: the other loops split by `HOLE_FRACTION` and `ACROSS_COS`
+        (membrane_areas mm^2, loop_along: mean |n . m| along each loop)."""
         V = self.V
         loops = boundary_loops(self.F, self.topo)
         lengths = [float(np.linalg.norm(V[lp] - V[np.roll(lp, -1)], axis=1).sum()) for lp in loops]
@@ -167,11 +170,16 @@ class SkinDistance:
         self.loop_lengths = [lengths[i] for i in order]
         self.loop_areas = [enclosed[i] for i in order]
         # the membrane's vector area of each loop (the same for every surface spanning it)
-        membrane = [float(np.linalg.norm(np.cross(V[lp], V[np.roll(lp, -1)]).sum(axis=0))) / 2 for lp in self.loops]
+        vec = [np.cross(V[lp], V[np.roll(lp, -1)]).sum(axis=0) / 2 for lp in self.loops]
+        membrane = [float(np.linalg.norm(v)) for v in vec]
         self.membrane_areas = membrane
+        # how far the skin along each loop runs on over its membrane (1: in its plane, 0: across)
+        self.loop_along = [float(np.abs(self.vn[lp] @ (v / max(a, 1e-300))).mean())
+                           for lp, v, a in zip(self.loops, vec, membrane)]
         big = max(membrane, default=0.0)
-        self.hole_loops = [lp for lp, a in zip(self.loops[1:], membrane[1:]) if a < HOLE_FRACTION * big]
-        self.end_loops = [lp for lp, a in zip(self.loops[1:], membrane[1:]) if a >= HOLE_FRACTION * big]
+        end = [a >= HOLE_FRACTION * big and c < ACROSS_COS for a, c in zip(membrane, self.loop_along)]
+        self.hole_loops = [lp for lp, e in zip(self.loops[1:], end[1:]) if not e]
+        self.end_loops = [lp for lp, e in zip(self.loops[1:], end[1:]) if e]
 
     def _rim_samples(self) -> None:
         """rim_pts (s,3): the border edges sampled every 0.05 mm (one far point when the region

@@ -588,8 +588,8 @@ def test_clean_collapses_slivers_a_hair_off_the_surface():
 
 @pytest.mark.parametrize("name", ["makehuman_elbow_patch.obj", "makehuman_knee_patch.obj"])
 def test_a_sleeve_keeps_both_ends_open_and_whole(name, monkeypatch):
-    """A ring of skin round an elbow or a knee: its two loops span about the same membrane, so
-    both are ends, not holes: the sleeve is one closed ring (genus 1) of the full wall, its
+    """A ring of skin round an elbow or a knee: its two loops span about the same membrane and
+    the skin stands across it (mean |n . m| under ACROSS_COS), so both are ends, not holes: the sleeve is one closed ring (genus 1) of the full wall, its
     volume about area x thickness.  Taking the far end for a hole (the rule for a loop the
     outer one dwarfs) cuts a channel through the sleeve and loses material."""
     from paths import data_mesh
