@@ -16,7 +16,7 @@ import numpy as np
 import manifold3d as m3
 
 from ..errors import BolusError
-from .marching import marching_manifold
+from .marching import marching_manifold_on
 from .narrow_band import field_narrow_band
 
 __all__ = ["_Grid", "_coarse_terms", "_field_coarse_to_fine", "_level_set_fast", "_tight_box",
@@ -192,8 +192,11 @@ def _solid_on_grid(skin, grid, t, c, progress, stats, mesher: str = "cubes"):
     lattices = (0, 1) if mesher == "level_set" else (0,)
     p_mid = 0.55 if mesher == "level_set" else 0.45
     if mesher == "cubes":
-        f, n_exact = field_narrow_band(skin, grid, t, c, rim_cap, progress, 0.05, p_mid)
-        fields = [f]
+        band_level = field_narrow_band(skin, grid, t, c, rim_cap, progress, 0.05, p_mid)
+        n_exact = band_level.evaluated_total
+        cubes, corner_values, _ = band_level.cubes()
+        del band_level
+        fields = [corner_values]
     else:
         coarse = _coarse_terms(skin, grid, t, c, band)
         step = (p_mid - 0.05) / len(lattices)
@@ -207,6 +210,8 @@ def _solid_on_grid(skin, grid, t, c, progress, stats, mesher: str = "cubes"):
     stats["exact_points"] = stats.get("exact_points", 0) + n_exact
     stats["grid_points"] = stats.get("grid_points", 0) + sum(
         int(np.prod(grid.shape0 if lattice == 0 else grid.shape1)) for lattice in lattices)
+    if mesher == "cubes":
+        stats["crossing_cubes"] = len(cubes)
     if not any(np.max(f, initial=-1.0) > 0 for f in fields):
         raise BolusError("the region is too small for this resolution: no voxel lies inside the shell; choose a "
                          "finer resolution or a larger region")
@@ -214,7 +219,7 @@ def _solid_on_grid(skin, grid, t, c, progress, stats, mesher: str = "cubes"):
     _progress(progress, p_mid, "marching cubes" if mesher == "cubes" else "level set")
     T1 = time.process_time()
     if mesher == "cubes":
-        M = marching_manifold(fields[0], grid.lo, grid.sp, pad=True)
+        M = marching_manifold_on(cubes, fields[0], grid.lo, grid.sp)
     else:
         M = _level_set_fast(grid, *fields)
     del fields

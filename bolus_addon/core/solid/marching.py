@@ -9,8 +9,9 @@ which calls a Python function at each of the twice as many points of its body-ce
 lattice.  libigl's case table gives a closed, edge-manifold mesh; corners exactly on the
 surface are nudged inside-out by 1e-12 so no vertex is shared by two cube edges.
 
-Arrays: values (nx+2, ny+2, nz+2) float64, positive inside the solid; out V (n,3) float64 mm,
-F (m,3) int64 wound outward.
+`marching_cubes_on` takes the crossing cubes and their corner values directly (the brick-stored
+narrow band hands them over without a dense lattice).  Arrays: values (nx, ny, nz) float64,
+positive inside the solid; out V (n,3) float64 mm, F (m,3) int64 wound outward.
 """
 from __future__ import annotations
 
@@ -20,7 +21,8 @@ import manifold3d as m3
 
 from .manifold import to_manifold
 
-__all__ = ["CUBE_CORNERS", "crossing_cubes", "marching_cubes", "marching_manifold"]
+__all__ = ["CUBE_CORNERS", "crossing_cubes", "marching_cubes", "marching_cubes_on", "marching_manifold",
+           "marching_manifold_on"]
 
 #: corner offsets of a cube in libigl's order (marching_cubes.cpp)
 CUBE_CORNERS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
@@ -48,30 +50,36 @@ def marching_cubes(values: np.ndarray, origin, spacing, pad: bool = False):
     the lattice point (i, j, k) at origin + (i, j, k) * spacing (mm), faces wound outward.
     pad: the lattice is taken as surrounded by one layer of -1 (no copy of it is made), so the
     surface closes at its box."""
-    import igl  # the compiled marching cubes (libigl)
-
     inside = values > 0  # a corner exactly on the surface counts as outside (nudged below)
     if pad:
         inside = np.pad(inside, 1)
-    cubes = crossing_cubes(inside)
+    cubes = crossing_cubes(inside) - (1 if pad else 0)
     del inside
+    corner = (cubes[:, None, :] + CUBE_CORNERS[None]).reshape(-1, 3)
+    real = np.all((corner >= 0) & (corner < np.array(values.shape)), axis=1)
+    S = np.full(len(corner), -1.0)
+    S[real] = values[tuple(corner[real].T)]
+    return marching_cubes_on(cubes, S.reshape(-1, 8), origin, spacing)
+
+
+def marching_cubes_on(cubes: np.ndarray, corner_values: np.ndarray, origin, spacing):
+    """The surface through given cubes only: lower corners cubes (k,3) int (lattice coordinates,
+    any sign), their corner values (k,8) in CUBE_CORNERS order, positive inside; (V, F) as
+    `marching_cubes`.  A corner shared by several cubes must carry one value in all of them."""
+    import igl  # the compiled marching cubes (libigl)
+
     if len(cubes) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
-    shape = np.array(values.shape) + (2 if pad else 0)
-    ny, nz = int(shape[1]), int(shape[2])
-    corner = cubes[:, None, :] + CUBE_CORNERS[None]                      # (k, 8, 3)
-    gid = (corner[..., 0] * ny + corner[..., 1]) * nz + corner[..., 2]   # (k, 8)
-    used, inv = np.unique(gid, return_inverse=True)
-    GI = inv.reshape(gid.shape).astype(np.int64)
-    i, rem = np.divmod(used, ny * nz)
-    j, k = np.divmod(rem, nz)
-    ijk = np.stack([i, j, k], axis=1) - (1 if pad else 0)
-    real = np.all((ijk >= 0) & (ijk < np.array(values.shape)), axis=1)
-    S = np.full(len(used), -1.0)
-    S[real] = values[tuple(ijk[real].T)]
+    corner = (cubes[:, None, :] + CUBE_CORNERS[None]).reshape(-1, 3)
+    lo = corner.min(axis=0)
+    dims = corner.max(axis=0) - lo + 1
+    gid = np.ravel_multi_index((corner - lo).T, tuple(int(d) for d in dims))
+    used, first, inv = np.unique(gid, return_index=True, return_inverse=True)
+    GI = inv.reshape(-1, 8).astype(np.int64)
+    S = np.asarray(corner_values, dtype=np.float64).ravel()[first].copy()
     S[S == 0.0] = -1e-12
-    GV = np.asarray(origin, dtype=np.float64) + ijk * np.asarray(spacing, dtype=np.float64)
-    res = igl.marching_cubes(np.ascontiguousarray(S), GV, GI, 0.0)  # (V, F[, E2V]): libigl 2.6.3 adds the edge map
+    GV = np.asarray(origin, dtype=np.float64) + corner[first] * np.asarray(spacing, dtype=np.float64)
+    res = igl.marching_cubes(np.ascontiguousarray(S), np.ascontiguousarray(GV), GI, 0.0)  # (V, F[, E2V]): libigl 2.6.3 adds the edge map
     V, F = np.asarray(res[0], dtype=np.float64), np.asarray(res[1], dtype=np.int64)
     return V, np.ascontiguousarray(F[:, ::-1])  # libigl winds {S > 0} inward
 
@@ -79,4 +87,10 @@ def marching_cubes(values: np.ndarray, origin, spacing, pad: bool = False):
 def marching_manifold(values: np.ndarray, origin, spacing, pad: bool = False) -> m3.Manifold:
     """`marching_cubes` as a manifold3d Manifold (empty when the surface is empty)."""
     V, F = marching_cubes(values, origin, spacing, pad)
+    return to_manifold(V, F, "the marched solid")
+
+
+def marching_manifold_on(cubes: np.ndarray, corner_values: np.ndarray, origin, spacing) -> m3.Manifold:
+    """`marching_cubes_on` as a manifold3d Manifold."""
+    V, F = marching_cubes_on(cubes, corner_values, origin, spacing)
     return to_manifold(V, F, "the marched solid")

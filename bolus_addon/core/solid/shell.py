@@ -47,14 +47,19 @@ from .shell_checks import (  # noqa: F401 (re-exported)
     _clean,
 )
 
-__all__ = ["Shell", "check_shell_request", "make_shell", "MAX_THICKNESS_MM", "MAX_GRID_POINTS"]
+__all__ = ["Shell", "check_shell_request", "make_shell", "MAX_THICKNESS_MM", "MAX_GRID_POINTS", "MAX_SKIN_CELLS"]
 
 MAX_THICKNESS_MM = 50.0
 #: voxels the wall (thickness - clearance) must span at least
 MIN_VOXELS_ACROSS = 4
-#: lattice points of the field (the ones the mesher reads: one lattice for marching cubes, both for the
-#: level set) above which the request is refused: about 11 bytes each at the peak (values, flags, masks)
+#: lattice points of the level-set peer's field (both of its lattices, dense) above which the
+#: request is refused: about 11 bytes each at the peak (values, flags, masks)
 MAX_GRID_POINTS = 120_000_000
+#: marching cubes stores the field in bricks along the surface, so its memory follows the skin's
+#: area in voxel faces (area / res^2), not the box: measured peak about 3.1 kB per face (the chest
+#: wall, 1,284 cm2 at 0.5 mm: 514k faces, 1.6 GB); 650k keeps a 400 x 400 mm region at 0.5 mm
+#: within 2 GB
+MAX_SKIN_CELLS = 650_000
 
 
 @dataclass
@@ -191,16 +196,26 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
 
 
 def _check_size(V, F, t, c, res, others, time_limit_s, mesher="cubes") -> None:
-    """Refuse, before any work, a region whose grid (its box grown by t + 3 res, voxel res mm)
-    has over MAX_GRID_POINTS points or whose wall t - c mm is estimated to take longer than the
+    """Refuse, before any work, a region of over MAX_SKIN_CELLS voxel faces of skin (marching
+    cubes), a grid (its box grown by t + 3 res, voxel res mm) of over MAX_GRID_POINTS points (the
+    level set), or a region whose wall t - c mm is estimated to take longer than the
     time budget (`budget.check_grid_budget`); the message advises a resolution that fits both."""
     pad = t + 3 * res
     grid = _Grid(V.min(axis=0) - pad, V.max(axis=0) + pad, res)
     size = V.max(axis=0) - V.min(axis=0)
     area = 0.5 * float(np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum())
     read = len(F) + (0 if others is None else len(others[1]))  # triangles the operator reads and checks
-    points = int(np.prod(grid.shape0)) if mesher == "cubes" else grid.points  # the lattices the mesher reads
-    if points > MAX_GRID_POINTS:  # the resolution advised also fits the time budget
+    cells = area / res ** 2
+    if mesher == "cubes" and cells > MAX_SKIN_CELLS:  # the resolution advised also fits the time budget
+        coarse = max(res * (cells / MAX_SKIN_CELLS) ** 0.5,
+                     grid_resolution_for_budget(area, t - c, res, read, time_limit_s)[2] or 0.0)
+        raise BolusError(
+            f"the region ({size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm, {area / 100:.0f} cm²) is "
+            f"{cells / 1e6:.2g} million voxel faces of skin at {res:g} mm, more than the "
+            f"{MAX_SKIN_CELLS / 1e6:.2g} million that fit in about 2 GB: choose a resolution of "
+            f"{np.ceil(coarse * 100) / 100:.2g} mm or coarser, or a smaller region")
+    points = grid.points
+    if mesher != "cubes" and points > MAX_GRID_POINTS:  # the resolution advised also fits the time budget
         coarse = max(res * (points / MAX_GRID_POINTS) ** (1 / 3),
                      grid_resolution_for_budget(area, t - c, res, read, time_limit_s)[2] or 0.0)
         raise BolusError(

@@ -207,8 +207,10 @@ def test_no_area_closed_and_flipped_regions():
 
 def test_too_many_grid_points_refused_with_a_choice():
     V, F = grid(2, 2, 2000.0)
-    with pytest.raises(BolusError, match=r"million grid points.*choose a resolution of [0-9.]+ mm or coarser"):
+    with pytest.raises(BolusError, match=r"million voxel faces.*choose a resolution of [0-9.]+ mm or coarser"):
         make_shell(V, F, 10.0, 0.0, 0.5)
+    with pytest.raises(BolusError, match=r"million grid points.*choose a resolution of [0-9.]+ mm or coarser"):
+        make_shell(V, F, 10.0, 0.0, 0.5, mesher="level_set")
 
 
 BASE = height_field(lambda x, y: 0.002 * (x ** 2 + y ** 2), nx=6, ny=6, size=50.0)
@@ -278,8 +280,9 @@ def test_field_bounds_agree_with_the_exact_field_at_a_folded_border():
 
 def test_narrow_band_field_is_exact_on_every_crossing_cube():
     """The levelled narrow band (core.solid.narrow_band) at the folded border of the curled
-    sheet: every lattice point carries the exact field's sign, every cube the exact surface
-    crosses has its eight corners at the exact value, and far fewer points were evaluated."""
+    sheet: every lattice point carries the exact field's sign (stored or guessed), every cube the
+    exact surface crosses is handed to the mesher with its eight corners at the exact value,
+    and far fewer points were evaluated or stored than the lattice has."""
     import bolus_addon.core.solid.shell as S
     from bolus_addon.core.solid.marching import CUBE_CORNERS, crossing_cubes
     from bolus_addon.core.solid.narrow_band import field_narrow_band
@@ -289,14 +292,20 @@ def test_narrow_band_field_is_exact_on_every_crossing_cube():
         skin = SkinDistance(V, F)
         g = S._Grid(V.min(axis=0) - t - 3 * res, V.max(axis=0) + t + 3 * res, res)
         rim_cap = 3 * g.sp.max()
-        f, n_exact = field_narrow_band(skin, g, t, c, rim_cap)
+        level = field_narrow_band(skin, g, t, c, rim_cap)
+        f = level.dense()
         P = np.stack(np.meshgrid(*g.axes(0), indexing="ij"), -1).reshape(-1, 3)
         exact = skin.field(P, t, c, rim_cap).reshape(f.shape)
         assert np.array_equal(f > 0, exact > 0)
-        cubes = crossing_cubes(exact > 0)
-        corner = tuple((cubes[:, None, :] + CUBE_CORNERS[None]).reshape(-1, 3).T)
-        assert len(cubes) > 100 and np.allclose(f[corner], exact[corner], atol=1e-9, rtol=0)
-        assert n_exact < 0.5 * f.size
+        want = crossing_cubes(np.pad(exact > 0, 1)) - 1
+        cubes, vals, ex = level.cubes()
+        key = lambda c: set(map(tuple, c.tolist()))
+        assert len(want) > 100 and key(cubes) == key(want) and ex.all()
+        corner = cubes[:, None, :] + CUBE_CORNERS[None]
+        inl = np.all((corner >= 0) & (corner < np.array(f.shape)), axis=2)
+        assert np.allclose(vals[inl], exact[tuple(corner[inl].T)], atol=1e-9, rtol=0)
+        assert np.all(vals[~inl] == -1.0)
+        assert level.evaluated_total < 0.5 * f.size and level.count < level.map.size
 
 
 def test_hole_on_a_curved_region_cuts_only_its_channel():
