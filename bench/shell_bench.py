@@ -84,9 +84,11 @@ from benchutil import ROOT, data_mesh, Table
 from unfold_bench import midpoint_subdivide, region_around, submesh
 
 THICKNESS_MM = 10.0
-RESOLUTIONS = {"example nose": (0.5, 1.0), "nefertiti face": (0.5, 1.0), "demosthenes face": (0.5, 1.0)}
+RESOLUTIONS = {"example nose": (0.5, 1.0), "nefertiti face": (0.5, 1.0), "demosthenes face": (0.5, 1.0),
+               "chest wall": (0.6, 1.0), "elbow sleeve": (0.5, 1.0)}
 #: the shell each region's parts are cut from (the face crops' 0.5 mm shells have over a million triangles)
-PARTS_RESOLUTION = {"example nose": 0.5, "nefertiti face": 1.0, "demosthenes face": 1.0}
+PARTS_RESOLUTION = {"example nose": 0.5, "nefertiti face": 1.0, "demosthenes face": 1.0, "chest wall": 1.0,
+                    "elbow sleeve": 1.0}
 RESOLUTIONS_QUICK = (1.0,)
 NOSE_RADIUS_MM = 45.0  # the demo's treatment area (scripts/demo.py --radius default)
 FACE_RADIUS_MM = 100.0
@@ -106,7 +108,7 @@ SOLIDIFY_MODES = (("Solidify even", "EVEN"), ("Solidify constraints", "CONSTRAIN
 #: ours with each mesher (core.solid.grid.MESHERS): marching cubes, and the previous method,
 #: manifold3d's level set ("ours R mm level set"), measured beside it in the same run
 MESHERS = ("cubes", "level_set")
-REGIONS = ("example nose", "nefertiti face", "demosthenes face")
+REGIONS = ("example nose", "nefertiti face", "demosthenes face", "chest wall", "elbow sleeve")
 QUICK_REGIONS = ("example nose",)
 
 
@@ -123,14 +125,16 @@ def _subdivide_to(V, F, min_faces: int):
 
 
 def outward(V, F, inside):
-    """(F, flipped): the triangles wound so that their area-weighted mean normal points away from ``inside`` (3,)."""
+    """(F, flipped): the triangles wound so that, area-weighted, their normals point away from
+    ``inside`` (3,) (face by face: a sleeve's normals cancel in their sum)."""
     import numpy as np
 
     from bolus_addon.core.mesh.topology import MeshTopology
 
     t = MeshTopology(V, F)
-    n = (t.face_normals * t.areas[:, None]).sum(axis=0)
-    if float(n @ (t.centroids.mean(axis=0) - inside)) >= 0:
+    away = t.centroids - inside
+    away /= np.maximum(np.linalg.norm(away, axis=1), 1e-12)[:, None]
+    if float(np.einsum("ij,ij,i->", t.face_normals, away, t.areas)) >= 0:
         return F, False
     return np.ascontiguousarray(F[:, ::-1]), True
 
@@ -190,7 +194,25 @@ def make_region(name: str) -> dict:
         s = demosthenes_scale()
         return face_region(name, "demosthenes.obj", s,
                            f"x {s:.1f}: head from chin y = {DEMOSTHENES_CHIN_Y} to crown = {HEAD_MM:g} mm")
+    if name in ("chest wall", "elbow sleeve"):
+        return body_patch(name)
     raise ValueError(f"unknown region {name!r}")
+
+
+def body_patch(name: str) -> dict:
+    """A crop of the MakeHuman body (tests/data, dm -> mm): the chest wall with the breasts
+    (355 x 314 x 152 mm, one loop) or a sleeve round the left elbow (two loops, both ends),
+    rewound so the normals point away from the body (a point behind the chest; the arm's axis)."""
+    import numpy as np
+
+    from bolus_addon.core.mesh.objfile import load_obj
+
+    fname = "makehuman_chest_patch.obj" if name == "chest wall" else "makehuman_elbow_patch.obj"
+    V, F, _ = load_obj(data_mesh(fname), 100.0)
+    inside = V.mean(axis=0) - (np.array([0.0, 0.0, 100.0]) if name == "chest wall" else 0.0)
+    F, flipped = outward(V, F, inside)
+    how = f"{fname} x100 (dm -> mm): {len(F)} triangles" + (", rewound outward" if flipped else "")
+    return {"name": name, "V": V, "F": F, "how": how}
 
 
 # ----------------------------------------------------------------------------- measures (one for both methods)

@@ -1,32 +1,23 @@
 """The shell field on the marching-cubes lattice, exact on the corners of every cube the surface
 crosses and guessed elsewhere, level by level from a coarse lattice, stored in bricks.
 
-Levels: the fine lattice (spacing sp), and coarser ones of spacing 2 sp, 4 sp, ... up to about
-a third of the wall (so the coarsest still has three points across it); point m of a level lies
-on point 2 m - 2 of the next finer one.  On the coarsest level the field is exact wherever a
-point is within t + 3 spacings of the skin (libigl's AABB distance), and elsewhere the bound
-f <= -3 spacings holds.  Then on every finer level:
+Levels: the fine lattice (spacing sp) and coarser ones of 2 sp, 4 sp, ... up to about a third of
+the wall; point m of a level lies on point 2 m - 2 of the next finer one.  The coarsest is exact
+within t + 3 spacings of the skin (libigl's AABB distance) and -3 spacings elsewhere (a bound
+of the field there).  Then on every finer level, h its spacing:
 
-    0. bricks  only the bricks (B^3 points) that meet a coarser cell whose corners are not all
-               above one fine spacing h or all below -h are stored; elsewhere the trilinear guess
-               of the coarser level has one sign and |g| >= h, so nothing there is evaluated;
-    1. guess   g(p) = trilinear interpolation of the coarser level (points on a coarser point
-               copy its value, exact where it was);
-    2. exact   f(p) where |g(p)| < h;
-    3. close   every cube whose eight corners do not share one sign and has a guessed corner:
-               those corners exact; then the 26 neighbours of every point whose exact sign
-               differs from its guess, again, until no guessed point is next to a sign change.
+    0. bricks  store only the bricks (B^3 points) that meet a coarser cell whose corners are
+               not all above h or all below -h; an unstored brick has one sign and reads sign h;
+    1. guess   g = trilinear interpolation of the coarser level (exact where it copies one);
+    2. exact   f where |g| < h;
+    3. close   every cube whose corners differ in sign and has a guessed corner: those corners
+               exact; then the 26 neighbours of every point whose sign flipped, until none.
 
 A wrong guess survives only inside a region of guessed points that all carry it, away from any
-crossing: a feature smaller than a coarse spacing that the coarser levels did not see at all.
-Unlike a Lipschitz bound this asks nothing of the rim term (which jumps where border normals
-cross), and it evaluates about the two layers of points per face that marching cubes reads.
-The bricks keep memory and time proportional to the surface, not to the box: a curved chest
-wall's box at 0.5 mm has some 10^8 points, its bricks a tenth of that.
-
-The fine lattice is `grid._Grid`'s lattice 0; outside it the field reads -1 (so the surface
-closes at its box).  Arrays: points as integer lattice coordinates ijk (k,3) int64; values
-float64 mm, positive inside the solid.
+crossing.  Memory and time follow the surface, not the box (docs/design/solid.md).  The fine
+lattice is `grid._Grid`'s lattice 0; outside it the field reads -1, so the surface closes at
+its box.  Points are integer lattice coordinates ijk (k,3) int64; values float64 mm, positive
+inside the solid.
 """
 from __future__ import annotations
 
