@@ -110,7 +110,7 @@ def _check_wall(surf: _Surface, face, bary, X, depth):
     WALL_FACTOR x depth (ray casts inward along the smooth normal, at most 400 of them)."""
     pick = np.arange(0, len(X), max(1, len(X) // 400))
     N, _ = surf.normal_at(face[pick], bary[pick])
-    wall = ray_thickness(surf.V, surf.F, X[pick], -N, max_mm=WALL_FACTOR * depth * 4, manifold=surf.M)
+    wall = ray_thickness(surf.V, surf.F, X[pick], -N, max_mm=WALL_FACTOR * depth * 4)
     if len(wall) and wall.min() < WALL_FACTOR * depth:
         i = int(np.argmin(wall))
         raise _NoFit(f"the wall under the text is only {wall[i]:.2f} mm thick at ({_xyz(X[pick][i])}) mm "

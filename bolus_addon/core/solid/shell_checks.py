@@ -89,7 +89,7 @@ def _measure_thickness(skin, M, V, F, side, t, c, res, max_rays=1500):
     O = V[cand]
     D = -vn[cand]
     L = 5.0 * t + 2 * res  # along the normal a filled valley is up to 4 t thick
-    dist, pts = ray_thickness(V, F, O, D, L, manifold=M, min_mm=1e-3, return_points=True)
+    dist, pts = ray_thickness(V, F, O, D, L, min_mm=1e-3, return_points=True)
     hit = np.isfinite(dist)
     outer = np.zeros(len(dist), dtype=bool)
     again = np.zeros(len(dist), dtype=bool)

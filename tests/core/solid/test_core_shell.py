@@ -378,7 +378,7 @@ def test_thickness_rays_skip_inner_vertices_without_a_normal():
     skin = SkinDistance(*grid(10, 10, 100.0))
     Vb, Fb = box((20.0, 20.0, 10.0), n=2)
     Vb = Vb + [40.0, 40.0, 0.0]
-    pillow = np.array([[50.0, 50.0, 5.0], [51.0, 50.0, 5.0], [50.0, 51.0, 5.0]])
+    pillow = np.array([[44.0, 44.0, 5.0], [45.0, 44.0, 5.0], [44.0, 45.0, 5.0]])  # off every ray's path
     V = np.r_[Vb, pillow]
     F = np.r_[Fb, [[len(Vb), len(Vb) + 1, len(Vb) + 2], [len(Vb), len(Vb) + 2, len(Vb) + 1]]]
     C = V[F].mean(axis=1)
