@@ -70,15 +70,18 @@ def marching_cubes_on(cubes: np.ndarray, corner_values: np.ndarray, origin, spac
 
     if len(cubes) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
-    corner = (cubes[:, None, :] + CUBE_CORNERS[None]).reshape(-1, 3)
-    lo = corner.min(axis=0)
-    dims = corner.max(axis=0) - lo + 1
-    gid = np.ravel_multi_index((corner - lo).T, tuple(int(d) for d in dims))
+    cubes = np.asarray(cubes, dtype=np.int64)
+    lo = cubes.min(axis=0)
+    dims = cubes.max(axis=0) - lo + 2
+    # a corner's key is its lower corner's plus the offset's (no (8k,3) array of corners)
+    stride = np.array([dims[1] * dims[2], dims[2], 1], dtype=np.int64)
+    gid = (((cubes - lo) @ stride)[:, None] + (CUBE_CORNERS @ stride)[None]).ravel()
     used, first, inv = np.unique(gid, return_index=True, return_inverse=True)
     GI = inv.reshape(-1, 8).astype(np.int64)
     S = np.asarray(corner_values, dtype=np.float64).ravel()[first].copy()
     S[S == 0.0] = -1e-12
-    GV = np.asarray(origin, dtype=np.float64) + corner[first] * np.asarray(spacing, dtype=np.float64)
+    corner = cubes[first // 8] + CUBE_CORNERS[first % 8]
+    GV = np.asarray(origin, dtype=np.float64) + corner * np.asarray(spacing, dtype=np.float64)
     res = igl.marching_cubes(np.ascontiguousarray(S), np.ascontiguousarray(GV), GI, 0.0)  # (V, F[, E2V]): libigl 2.6.3 adds the edge map
     V, F = np.asarray(res[0], dtype=np.float64), np.asarray(res[1], dtype=np.int64)
     return V, np.ascontiguousarray(F[:, ::-1])  # libigl winds {S > 0} inward

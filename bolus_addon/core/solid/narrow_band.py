@@ -35,8 +35,9 @@ _NEIGHBOURS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k 
                         if (i, j, k) != (0, 0, 0)], dtype=np.int64)
 _LOCAL = np.stack(np.meshgrid(*[np.arange(BRICK)] * 3, indexing="ij"), -1).reshape(-1, 3)
 _HALO = np.stack(np.meshgrid(*[np.arange(-1, BRICK + 1)] * 3, indexing="ij"), -1).reshape(-1, 3)
-_SHELL_AT = np.nonzero(np.any((_HALO < 0) | (_HALO >= BRICK), axis=1))[0]  # the halo's outer layer
-_SHELL = _HALO[_SHELL_AT]
+# a neighbour at offset -1 / 0 / +1 on an axis gives its points B-1 / all / 0 to the halo's 0 / 1..B / B+1
+_SRC = {-1: BRICK - 1, 0: slice(None), 1: 0}
+_DST = {-1: 0, 0: slice(1, BRICK + 1), 1: BRICK + 1}
 _PARENT = np.stack(np.meshgrid(*[np.arange(5)] * 3, indexing="ij"), -1).reshape(-1, 3)
 # a fine point l (0..B-1) of a brick lies on coarse block point _ML[l] (+ half a step when odd)
 _ML = (np.arange(BRICK) + 2) // 2 - 1
@@ -229,19 +230,44 @@ class BrickLevel:
     # ------------------------------------------------------------------ cubes
     def halos(self):
         """Yields (origins (k,3), values (k, B+2, B+2, B+2), exact (same)) of the stored bricks,
-        each with one layer of points around it (lattice points o - 1 .. o + B)."""
+        each with one layer of points around it (lattice points o - 1 .. o + B): the layer is
+        copied face, edge and corner from the 26 neighbouring bricks (an unstored one gives its
+        sign * h, guessed; beyond the lattice -1, exact), as `get` reads them."""
         n = BRICK + 2
+        c3 = self.count * _B3
+        vals3 = self.vals[:c3].reshape(-1, BRICK, BRICK, BRICK)
+        ex3 = self.exact[:c3].reshape(-1, BRICK, BRICK, BRICK)
         for s in range(1, self.count, _HALO_BRICKS):
             ids = np.arange(s, min(self.count, s + _HALO_BRICKS))
             o = self.origin[ids]
+            b = o // BRICK
             V = np.empty((len(ids), n, n, n))
             E = np.empty((len(ids), n, n, n), dtype=bool)
-            sl = slice(ids[0] * _B3, (ids[-1] + 1) * _B3)
-            V[:, 1:-1, 1:-1, 1:-1] = self.vals[sl].reshape(-1, BRICK, BRICK, BRICK)
-            E[:, 1:-1, 1:-1, 1:-1] = self.exact[sl].reshape(-1, BRICK, BRICK, BRICK)
-            v, e = self.get((o[:, None, :] + _SHELL[None]).reshape(-1, 3))
-            V.reshape(len(ids), -1)[:, _SHELL_AT] = v.reshape(len(ids), -1)
-            E.reshape(len(ids), -1)[:, _SHELL_AT] = e.reshape(len(ids), -1)
+            V[:, 1:-1, 1:-1, 1:-1] = vals3[ids]
+            E[:, 1:-1, 1:-1, 1:-1] = ex3[ids]
+            for d in _NEIGHBOURS:
+                nb = self.map[b[:, 0] + 1 + d[0], b[:, 1] + 1 + d[1], b[:, 2] + 1 + d[2]]
+                src = tuple(_SRC[int(x)] for x in d)
+                dst = (slice(None),) + tuple(_DST[int(x)] for x in d)
+                have = nb >= 0
+                v = vals3[(np.maximum(nb, 0),) + src]
+                e = ex3[(np.maximum(nb, 0),) + src]
+                if not have.all():
+                    miss = np.nonzero(~have)[0]
+                    sg = self.h * self._brick_sign(b[miss] + d)
+                    v[miss] = sg.reshape((-1,) + (1,) * (v.ndim - 1))
+                    e[miss] = False
+                V[dst] = v
+                E[dst] = e
+            edge = np.nonzero(np.any(b >= self.nb - 1, axis=1))[0]
+            if len(edge):  # halo points beyond the lattice of the bricks at its border read -1
+                pts = o[edge][:, None, :] + _HALO[None]
+                out = ~np.all((pts >= 0) & (pts < self.shape), axis=2)
+                Vf = V[edge].reshape(len(edge), -1)
+                Ef = E[edge].reshape(len(edge), -1)
+                Vf[out], Ef[out] = -1.0, True
+                V[edge] = Vf.reshape(-1, n, n, n)
+                E[edge] = Ef.reshape(-1, n, n, n)
             yield o, V, E
 
     def cubes(self, guessed_only: bool = False, bound: float | None = None, corners: bool = True):

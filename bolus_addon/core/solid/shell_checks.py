@@ -80,8 +80,10 @@ def _measure_thickness(skin, M, V, F, side, t, c, res, max_rays=1500):
     verts = verts[np.linalg.norm(vn[verts], axis=1) > 0.5]  # a crease's faces can cancel: no normal there
     if len(verts) == 0:
         return np.zeros(0), {"rays": 0, "outer": 0, "skin": 0, "wall": 0, "none": 0}, None
-    drim, _ = skin.rim_tree.query(V[verts], workers=2)
-    cand = verts[drim > t]
+    # bounded: a point beyond t reads inf, and the tree stops early (unbounded, the query of a
+    # 757k-triangle shell's inner vertices against a long rim took seconds)
+    drim, _ = skin.rim_tree.query(V[verts], workers=2, distance_upper_bound=t)
+    cand = verts[~np.isfinite(drim)]
     if len(cand) == 0:
         cand = verts[drim >= np.max(drim) * 0.5]
     if len(cand) > max_rays:
