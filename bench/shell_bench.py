@@ -18,7 +18,13 @@ the bolus grows on):
   holding it, midpoint-subdivided until it has at least ``MIN_FACES`` triangles;
 * ``demosthenes face``: ``demosthenes.obj`` (normalised units) scaled so that its head,
   from the chin (y = ``DEMOSTHENES_CHIN_Y``, where the shoulders end) to the crown (the
-  largest y), is ``HEAD_MM`` tall; then cropped and subdivided like nefertiti.
+  largest y), is ``HEAD_MM`` tall; then cropped and subdivided like nefertiti;
+* ``chest wall``, ``elbow sleeve``, ``knee sleeve``: the MakeHuman crops of tests/data and
+  assets (dm -> mm; the sleeves are tubes, both loops ends); ``breast``, ``ear``: crops of the
+  whole MakeHuman body (``BODY_CROPS``), subdivided.
+
+The estimate column is `core.budget`'s estimate of ``make_shell`` (what a refusal is judged by);
+every call runs with no time limit.
 
 For every region, each call in a child process of its own (``--worker``: the figures
 of one call do not depend on what ran before, and the peak memory is the child's):
@@ -85,10 +91,11 @@ from unfold_bench import midpoint_subdivide, region_around, submesh
 
 THICKNESS_MM = 10.0
 RESOLUTIONS = {"example nose": (0.5, 1.0), "nefertiti face": (0.5, 1.0), "demosthenes face": (0.5, 1.0),
-               "chest wall": (0.6, 1.0), "elbow sleeve": (0.5, 1.0)}
+               "chest wall": (0.5, 1.0), "elbow sleeve": (0.5, 1.0), "breast": (0.5, 1.0), "ear": (0.5, 1.0),
+               "knee sleeve": (0.5, 1.0)}
 #: the shell each region's parts are cut from (the face crops' 0.5 mm shells have over a million triangles)
 PARTS_RESOLUTION = {"example nose": 0.5, "nefertiti face": 1.0, "demosthenes face": 1.0, "chest wall": 1.0,
-                    "elbow sleeve": 1.0}
+                    "elbow sleeve": 1.0, "breast": 1.0, "ear": 1.0, "knee sleeve": 1.0}
 RESOLUTIONS_QUICK = (1.0,)
 NOSE_RADIUS_MM = 45.0  # the demo's treatment area (scripts/demo.py --radius default)
 FACE_RADIUS_MM = 100.0
@@ -108,7 +115,11 @@ SOLIDIFY_MODES = (("Solidify even", "EVEN"), ("Solidify constraints", "CONSTRAIN
 #: ours with each mesher (core.solid.grid.MESHERS): marching cubes, and the previous method,
 #: manifold3d's level set ("ours R mm level set"), measured beside it in the same run
 MESHERS = ("cubes", "level_set")
-REGIONS = ("example nose", "nefertiti face", "demosthenes face", "chest wall", "elbow sleeve")
+#: the resolutions the level-set peer runs at (elsewhere 1.0 mm only: on the chest wall at 0.5 mm it
+#: takes about 9 minutes and 5.6 GB)
+LEVEL_SET_RESOLUTIONS = {"example nose": (0.5, 1.0)}
+REGIONS = ("example nose", "nefertiti face", "demosthenes face", "chest wall", "elbow sleeve", "breast", "ear",
+           "knee sleeve")
 QUICK_REGIONS = ("example nose",)
 
 
@@ -194,25 +205,63 @@ def make_region(name: str) -> dict:
         s = demosthenes_scale()
         return face_region(name, "demosthenes.obj", s,
                            f"x {s:.1f}: head from chin y = {DEMOSTHENES_CHIN_Y} to crown = {HEAD_MM:g} mm")
-    if name in ("chest wall", "elbow sleeve"):
+    if name in ("chest wall", "elbow sleeve", "knee sleeve"):
         return body_patch(name)
+    if name in ("breast", "ear"):
+        return body_crop(name)
     raise ValueError(f"unknown region {name!r}")
 
 
 def body_patch(name: str) -> dict:
-    """A crop of the MakeHuman body (tests/data, dm -> mm): the chest wall with the breasts
-    (355 x 314 x 152 mm, one loop) or a sleeve round the left elbow (two loops, both ends),
-    rewound so the normals point away from the body (a point behind the chest; the arm's axis)."""
+    """A crop of the MakeHuman body (dm -> mm): the chest wall with the breasts (tests/data, 355 x
+    314 x 152 mm, one loop), or a sleeve round the left elbow (tests/data) or the left knee
+    (assets; two loops each, both ends), rewound so the normals point away from the body (a point
+    behind the chest; the limb's axis)."""
     import numpy as np
 
     from bolus_addon.core.mesh.objfile import load_obj
 
-    fname = "makehuman_chest_patch.obj" if name == "chest wall" else "makehuman_elbow_patch.obj"
-    V, F, _ = load_obj(data_mesh(fname), 100.0)
+    fname = {"chest wall": "makehuman_chest_patch.obj", "elbow sleeve": "makehuman_elbow_patch.obj",
+             "knee sleeve": "makehuman_knee_patch.obj"}[name]
+    path = ROOT / "assets" / fname if name == "knee sleeve" else data_mesh(fname)
+    V, F, _ = load_obj(path, 100.0)
     inside = V.mean(axis=0) - (np.array([0.0, 0.0, 100.0]) if name == "chest wall" else 0.0)
     F, flipped = outward(V, F, inside)
     how = f"{fname} x100 (dm -> mm): {len(F)} triangles" + (", rewound outward" if flipped else "")
     return {"name": name, "V": V, "F": F, "how": how}
+
+
+#: crops of the MakeHuman body (tests/data/makehuman_body.obj, dm -> mm, Y up, facing +z): the
+#: point the crop is centred on (picked from the mesh: the most forward vertex of the left chest at
+#: nipple height; the most lateral vertex of the head, the left ear), its radius (mm), the point
+#: the normals must point away from, and the midpoint subdivisions (the body is coarse: ~20 mm quads)
+BODY_CROPS = {"breast": ("breast", 100.0, "behind", 2), "ear": ("ear", 40.0, "head", 2)}
+
+
+def body_crop(name: str) -> dict:
+    """A treatment area cut from the whole MakeHuman body: the triangles within the crop's radius
+    of its centre, edge-connected to the one nearest it (`region_around`), midpoint-subdivided."""
+    import numpy as np
+
+    from bolus_addon.core.mesh.objfile import load_obj
+
+    V, F, _ = load_obj(data_mesh("makehuman_body.obj"), 100.0)
+    what, radius, away, subdiv = BODY_CROPS[name]
+    if what == "breast":
+        pick = (V[:, 1] > 250) & (V[:, 1] < 400) & (V[:, 0] > 60) & (V[:, 0] < 140)
+        centre = V[pick][np.argmax(V[pick][:, 2])]
+        inside = centre - [0.0, 0.0, 120.0]
+    else:
+        head = V[:, 1] > V[:, 1].max() - 250.0
+        centre = V[head][np.argmax(V[head][:, 0])]
+        inside = np.array([0.0, centre[1], centre[2]])
+    Vr, Fr = region_around(V, F, centre, radius)
+    for _ in range(subdiv):
+        Vr, Fr = midpoint_subdivide(Vr, Fr)
+    Fr, flipped = outward(Vr, Fr, inside)
+    how = (f"makehuman_body.obj x100 (dm -> mm), within {radius:g} mm of ({centre[0]:.0f}, {centre[1]:.0f}, "
+           f"{centre[2]:.0f}), subdivided {subdiv}x: {len(Fr)} triangles" + (", rewound outward" if flipped else ""))
+    return {"name": name, "V": Vr, "F": Fr, "how": how}
 
 
 # ----------------------------------------------------------------------------- measures (one for both methods)
@@ -441,11 +490,17 @@ def measured(fn):
 
 
 def work_ours(data: dict, job: dict) -> tuple[dict, dict]:
+    """make_shell with no time limit; its estimate (`budget`, what a refusal is judged by) beside it."""
+    import numpy as np
+
+    from bolus_addon.core import budget
     from bolus_addon.core.solid.shell import make_shell
 
     V, F = data["V"], data["F"]
     sh, st = measured(lambda: make_shell(V, F, thickness=job["thickness"], resolution=job["resolution"],
-                                         mesher=job.get("mesher", "cubes")))
+                                         mesher=job.get("mesher", "cubes"), time_limit_s=0))
+    area = 0.5 * float(np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum())
+    st["estimate_s"] = budget.estimate_s("make_shell", budget.shell_cells(area, job["resolution"]))
     st.update(volume_mm3=float(sh.volume_mm3), holes=int(sh.holes), warnings=list(sh.warnings),
               self_thickness=[float(sh.thickness_min), float(sh.thickness_mean), float(sh.thickness_max)],
               shell_stats=getattr(sh, "stats", None))
@@ -550,7 +605,8 @@ def bench_region(region: dict, resolutions, tmp: Path, keep: bool = False, parts
     row = {"region": name, "how": region["how"], "faces": int(len(F)), "runs": [], "parts": None}
     skin = {"V": V, "F": F}
     shells = {}
-    for res, mesher in [(r, m) for r in resolutions for m in MESHERS]:
+    for res, mesher in [(r, m) for r in resolutions for m in MESHERS
+                        if m == "cubes" or r in LEVEL_SET_RESOLUTIONS.get(name, (1.0,)) or len(resolutions) == 1]:
         key = f"ours {res:g} mm" + ("" if mesher == "cubes" else " level set")
         try:
             out, st = run_worker("ours", skin, tmp, keep, region=name, thickness=t, resolution=res, mesher=mesher)
@@ -645,7 +701,8 @@ def print_run(r: dict, t: float) -> None:
     if "error" in r:
         return
     th = r["thickness"]
-    print(f"   {r['method']}: {r['seconds']:.2f} s, peak +{mem_text(r)} MB, {r['triangles']} triangles, "
+    est = f" (estimated {r['estimate_s']:.1f} s)" if r.get("estimate_s") and "level set" not in r["method"] else ""
+    print(f"   {r['method']}: {r['seconds']:.2f} s{est}, peak +{mem_text(r)} MB, {r['triangles']} triangles, "
           f"closed {closed_text(r['closed'])}, volume {r['closed']['volume_mm3'] / 1000:.2f} cm³, thickness "
           f"{_f(th['min'])} / {_f(th['mean'])} / {_f(th['max'])} mm on the {th['outer']} of {th['rays']} rays that "
           f"end on the outer face ({th['thin']} below {0.95 * t:g} mm; {ray_ends(th)}), {r['self_intersections']} "
@@ -683,7 +740,8 @@ def pct_text(x) -> str:
 
 
 def shell_table(rows: list[dict], t: float) -> Table:
-    tab = Table([("region", "<"), ("method", "<"), ("time s", ">"), ("cpu s", ">"), ("peak MB", ">"),
+    tab = Table([("region", "<"), ("method", "<"), ("time s", ">"), ("estimate s", ">"), ("cpu s", ">"),
+                 ("peak MB", ">"),
                  ("triangles", ">"),
                  ("closed", "<"), ("volume cm³", ">"), ("t min", ">"), ("t mean", ">"), ("t max", ">"),
                  (f"< {0.95 * t:g} / rays", ">"), ("skin / wall / none", ">"),
@@ -698,7 +756,9 @@ def shell_table(rows: list[dict], t: float) -> Table:
                 tab.add_error(f"{first}: {r['method']}", r["error"])
                 continue
             th = r["thickness"]
-            tab.add(first, r["method"], f"{r['seconds']:.2f}", cpu_text(r), mem_text(r), r["triangles"],
+            est = r.get("estimate_s") if r["method"].startswith("ours") and "level set" not in r["method"] else None
+            tab.add(first, r["method"], f"{r['seconds']:.2f}", "n/a" if est is None else f"{est:.1f}", cpu_text(r),
+                    mem_text(r), r["triangles"],
                     closed_text(r["closed"]),
                     f"{r['closed']['volume_mm3'] / 1000:.2f}", _f(th["min"]), _f(th["mean"]), _f(th["max"]),
                     f"{th['thin']} / {th['rays']}", f"{th['skin']} / {th['wall']} / {th['none']}",

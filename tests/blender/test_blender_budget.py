@@ -140,8 +140,8 @@ def test_make_shell_refuses_over_budget_with_a_resolution_that_fits(monkeypatch)
 
     V, F = spherical_cap(60.0, 50.0, 4)
     area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
-    est = budget.estimate_s("make_shell", budget.shell_voxels(area, 5.0, 0.5))
-    assert est > budget.estimate_s("make_shell", budget.shell_voxels(area, 5.0, 1.0))  # finer costs more
+    est = budget.estimate_s("make_shell", budget.shell_cells(area, 0.5))
+    assert est > budget.estimate_s("make_shell", budget.shell_cells(area, 1.0))  # finer costs more
     limit = budget.lower_bound_s(est) / 1.5  # even the lower bound is over it
     monkeypatch.setenv(ENV, f"{limit:.6f}")
     with pytest.raises(BolusError, match=r"a 5 mm wall on the region .* cm²\) at 0.5 mm: Make Bolus would take about "

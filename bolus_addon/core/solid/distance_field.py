@@ -158,8 +158,10 @@ class SkinDistance:
         """loops, loop_lengths (mm), loop_areas (mm^2): the border loops, outer one first.  The
         outer loop encloses the most area seen along the region's mean normal mean_n (3,) (the
         longest loop is not it where a border zigzags along whole faces: a dome's cut top).
-        hole_loops / end_loops: the other loops split by `HOLE_FRACTION` and `ACROSS_COS`
-        (membrane_areas mm^2, loop_along: mean |n . m| along each loop)."""
+        outer_loops: the first loop of each island (edge-connected piece of the region); hole_loops
+        / end_loops: the other loops split by `HOLE_FRACTION` (against the largest membrane of
+        their island) and `ACROSS_COS` (membrane_areas mm^2, loop_along: mean |n . m| along each
+        loop)."""
         V = self.V
         loops = boundary_loops(self.F, self.topo)
         lengths = [float(np.linalg.norm(V[lp] - V[np.roll(lp, -1)], axis=1).sum()) for lp in loops]
@@ -176,10 +178,23 @@ class SkinDistance:
         # how far the skin along each loop runs on over its membrane (1: in its plane, 0: across)
         self.loop_along = [float(np.abs(self.vn[lp] @ (v / max(a, 1e-300))).mean())
                            for lp, v, a in zip(self.loops, vec, membrane)]
-        big = max(membrane, default=0.0)
-        end = [a >= HOLE_FRACTION * big and c < ACROSS_COS for a, c in zip(membrane, self.loop_along)]
-        self.hole_loops = [lp for lp, e in zip(self.loops[1:], end[1:]) if not e]
-        self.end_loops = [lp for lp, e in zip(self.loops[1:], end[1:]) if e]
+        # each island (edge-connected piece of the region) has its own outer loop, its first loop
+        # in this order; the other loops are judged against the largest membrane of their island
+        _, comp = self.topo.face_components()
+        vface = np.full(len(V), -1, dtype=np.int64)
+        vface[self.F.ravel()] = np.repeat(comp, 3)
+        island = [int(vface[lp[0]]) for lp in self.loops]
+        big: dict = {}
+        for i, a in zip(island, membrane):
+            big[i] = max(big.get(i, 0.0), a)
+        outer, seen = [], set()
+        for i in island:
+            outer.append(i not in seen)
+            seen.add(i)
+        self.outer_loops = [lp for lp, o in zip(self.loops, outer) if o]
+        end = [a >= HOLE_FRACTION * big[i] and c < ACROSS_COS for a, c, i in zip(membrane, self.loop_along, island)]
+        self.hole_loops = [lp for lp, e, o in zip(self.loops, end, outer) if not (e or o)]
+        self.end_loops = [lp for lp, e, o in zip(self.loops, end, outer) if e and not o]
 
     def _rim_samples(self) -> None:
         """rim_pts (s,3): the border edges sampled every 0.05 mm (one far point when the region

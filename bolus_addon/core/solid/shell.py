@@ -280,9 +280,14 @@ def _cleaned(M, warnings):
     """`_clean` (crumbs under KEEP_PIECE_FRACTION dropped, arrays read back until stable):
     (M, Vo (n,3), Fo (m,3)), with warnings for the pieces dropped and for several pieces left."""
     M, Vo, Fo, dropped, pieces = _clean(M)
-    if dropped:
-        warnings.append(f"{len(dropped)} small piece(s) of {sum(dropped):.3g} mm^3 in total, cut off by the hole "
+    crumbs = [v for v in dropped if v >= 0]
+    voids = [-v for v in dropped if v < 0]  # a closed surface wound inward: an air pocket inside the solid
+    if crumbs:
+        warnings.append(f"{len(crumbs)} small piece(s) of {sum(crumbs):.3g} mm^3 in total, cut off by the hole "
                         "channels or thinner than the resolution, were removed")
+    if voids:
+        warnings.append(f"{len(voids)} air pocket(s) of {sum(voids):.3g} mm^3 in total enclosed inside the bolus "
+                        "(where the skin folds under itself, e.g. behind an ear) were filled")
     if pieces > 1:
         warnings.append(f"the shell has {pieces} separate pieces (the region has parts farther apart than the "
                         "thickness)")

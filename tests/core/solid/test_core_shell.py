@@ -205,6 +205,22 @@ def test_no_area_closed_and_flipped_regions():
         make_shell(np.zeros((0, 3)), np.zeros((0, 3), dtype=int), 5.0, 0.0, 1.0)
 
 
+def test_region_of_two_islands_gives_two_whole_pieces():
+    """Two hemispheres 200 mm apart in one region: each island's rim is its own outer loop (not
+    a hole of the other, whose channel would cut the second bolus away); two closed pieces,
+    each of the analytic shell volume, and a warning that says so."""
+    V, F = hemisphere(nlat=12, na=36)
+    VV = np.r_[V, V + [200.0, 0.0, 0.0]]
+    FF = np.r_[F, F + len(V)]
+    sh = make_shell(VV, FF, 10.0, 0.0, 2.0)
+    assert sh.holes == 0
+    assert any("2 separate pieces" in w for w in sh.warnings)
+    assert not any("removed" in w for w in sh.warnings)
+    exact = 2.0 / 3.0 * math.pi * (70.0 ** 3 - 60.0 ** 3)
+    vols = sorted(p.volume() for p in to_manifold(sh.V, sh.F).decompose())
+    assert len(vols) == 2 and all(abs(v / exact - 1) < 0.03 for v in vols)  # the facets of 36 sectors
+
+
 def test_too_many_grid_points_refused_with_a_choice():
     V, F = grid(2, 2, 2000.0)
     with pytest.raises(BolusError, match=r"million voxel faces.*choose a resolution of [0-9.]+ mm or coarser"):
