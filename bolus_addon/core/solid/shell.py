@@ -311,7 +311,8 @@ def _thickness_figures(th, rays, spot, wall, warnings) -> tuple[float, float, fl
     warnings for a wall under 95 % of ``wall`` mm (at ``spot``) and for fewer than 95 % of the
     rays (`rays`: counts by what they met) reaching the outer face."""
     if len(th):
-        tmin, tmean, tmax = float(th.min()), float(th.mean()), float(th.max())
+        tmin, tmax = float(th.min()), float(th.max())
+        tmean = min(max(float(th.mean()), tmin), tmax)  # a sum's rounding can put the mean an ulp outside
         if tmin < 0.95 * wall:
             warnings.append(f"the wall is only {tmin:.2f} mm thick near {_fmt(spot)} (thickness {wall:g} mm asked)")
     else:

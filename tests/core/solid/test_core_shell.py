@@ -632,3 +632,15 @@ def test_a_sleeve_keeps_both_ends_open_and_whole(name, monkeypatch):
     monkeypatch.setattr(DF, "HOLE_FRACTION", 1e9)  # every loop but the outer one a hole
     cut = make_shell(V, F, t, 0.0, res, time_limit_s=0)
     assert cut.holes == 1 and cut.volume_mm3 < 0.99 * sh.volume_mm3
+
+
+def test_thickness_mean_stays_between_min_and_max():
+    # eleven equal rays: numpy's pairwise sum puts their mean one ulp below each of them
+    th = np.full(11, 1.0000000128746032)
+    assert th.mean() < th.min()  # the rounding the figures must not show
+    from bolus_addon.core.solid.shell import _thickness_figures
+    warnings: list = []
+    tmin, tmean, tmax = _thickness_figures(th, {"rays": 11, "outer": 11}, np.zeros(3), 1.0, warnings)
+    assert tmin <= tmean <= tmax
+    assert tmean == pytest.approx(1.0000000128746032, abs=1e-15)
+    assert warnings == []
