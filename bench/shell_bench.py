@@ -31,7 +31,9 @@ of one call do not depend on what ran before, and the peak memory is the child's
 
 * ours: ``make_shell(V, F, thickness=10, resolution=r)`` for r in ``RESOLUTIONS`` (0.5 and 1.0 mm;
   ``--resolution R`` (repeatable) runs R instead), with the marching-cubes mesher and again with
-  the previous one, manifold3d's level set (``mesher="level_set"``, rows "ours R mm level set");
+  the previous one, manifold3d's level set (``mesher="level_set"``, rows "ours R mm level set"),
+  and at the finest resolution once more with the rim wall as a ruled strip along the smoothed
+  border normals and sharp creases (``rim="strip"``, row "ours R mm strip rim");
 * the peer: Blender's Solidify modifier on a mesh object of the same region,
   ``solidify_mode='NON_MANIFOLD'`` (complex), ``thickness=10``, ``offset=+1`` (the new
   face on the side the normals point to), ``use_rim=True``, ``use_even_offset=True``,
@@ -57,6 +59,9 @@ Then, measured here the same way for both (``measure_solid``):
 * self-intersecting face pairs: ``BVHTree.overlap`` of the solid with itself, pairs that
   share a vertex (a position: twin vertices count as one) left out (coplanar overlaps are not
   found by it);
+* rim smoothness (SPEC): the 95th percentile and the largest of the rim-wall vertices' distances
+  from the quadric fitted to their wall neighbours within 2 mm (`rim_residuals`; ours: the
+  ``SIDE_RIM`` faces, hole walls included; Solidify: its rim faces); smooth at <= 0.05 mm;
 * folded triangles (Solidify only): offset-layer triangles whose normal turned against
   their source face's (n . n_source <= 0; the modifier copies a face attribute holding
   the source face index).
@@ -371,9 +376,46 @@ def folded_triangles(V, F, src, skin_V, skin_F) -> int:
     return int(folded_mask(V, F, src, skin_V, skin_F).sum())
 
 
+#: mm: a rim-wall vertex's neighbours for the quadric fit (SPEC's rim smoothness)
+RIM_RADIUS_MM = 2.0
+#: mm: the 95th percentile of the rim residuals at or below this is a smooth rim (SPEC)
+RIM_SMOOTH_MM = 0.05
+
+
+def rim_residuals(V, F, walls, radius: float = RIM_RADIUS_MM, most: int = 20000):
+    """SPEC's rim smoothness: for each vertex of the wall triangles F[walls] (every one, or ``most``
+    evenly spread), its distance (mm) from the quadric z = q(x, y) fitted by least squares, in the
+    frame of the principal axes of its wall neighbours within ``radius`` mm (z the least one), to
+    those neighbours; vertices with fewer than 8 neighbours are left out.  Returns (k,) float."""
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    verts = np.unique(np.asarray(F)[np.asarray(walls)])
+    P = np.asarray(V, dtype=np.float64)[verts]
+    if len(P) == 0:
+        return np.zeros(0)
+    pick = np.arange(len(P))
+    if len(pick) > most:
+        pick = pick[np.linspace(0, len(P) - 1, most).round().astype(int)]
+    out = []
+    for i, near in zip(pick, cKDTree(P).query_ball_point(P[pick], radius)):
+        if len(near) < 8:
+            continue
+        Q = P[near] - P[near].mean(axis=0)
+        axes = np.linalg.svd(Q, full_matrices=False)[2]
+        x, y, z = (Q @ axes.T).T
+        A = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], axis=1)
+        coef = np.linalg.lstsq(A, z, rcond=None)[0]
+        xi, yi, zi = axes @ (P[i] - P[near].mean(axis=0))
+        out.append(abs(zi - np.array([xi * xi, xi * yi, yi * yi, xi, yi, 1.0]) @ coef))
+    return np.asarray(out)
+
+
 def measure_solid(V, F, outer, walls, skin_V, skin_F, thickness: float) -> dict:
     """The figures of one solid (V, F) with its outer faces and its rim / hole walls (masks (m,) bool) on the skin
     (skin_V, skin_F)."""
+    import numpy as np
+
     from bolus_addon.core.solid.manifold import closed_report
 
     rep = closed_report(V, F)
@@ -381,8 +423,11 @@ def measure_solid(V, F, outer, walls, skin_V, skin_F, thickness: float) -> dict:
     t.pop("distances")
     pairs = intersecting_pairs(V, F)
     spots = V[F[pairs[:SPOTS, 0]]].mean(axis=1)
+    rim = rim_residuals(V, F, walls)
     return {"triangles": int(len(F)), "closed": rep, "thickness": t, "self_intersections": int(len(pairs)),
-            "self_intersection_spots": [[round(float(x), 1) for x in p] for p in spots]}
+            "self_intersection_spots": [[round(float(x), 1) for x in p] for p in spots],
+            "rim_p95": float(np.percentile(rim, 95)) if len(rim) else None,
+            "rim_max": float(rim.max()) if len(rim) else None}
 
 
 # ----------------------------------------------------------------------------- Solidify
@@ -498,7 +543,8 @@ def work_ours(data: dict, job: dict) -> tuple[dict, dict]:
 
     V, F = data["V"], data["F"]
     sh, st = measured(lambda: make_shell(V, F, thickness=job["thickness"], resolution=job["resolution"],
-                                         mesher=job.get("mesher", "cubes"), time_limit_s=0))
+                                         mesher=job.get("mesher", "cubes"), rim=job.get("rim", "faces"),
+                                         time_limit_s=0))
     area = 0.5 * float(np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum())
     st["estimate_s"] = budget.estimate_s("make_shell", budget.shell_cells(area, job["resolution"]))
     st.update(volume_mm3=float(sh.volume_mm3), holes=int(sh.holes), warnings=list(sh.warnings),
@@ -605,13 +651,16 @@ def bench_region(region: dict, resolutions, tmp: Path, keep: bool = False, parts
     row = {"region": name, "how": region["how"], "faces": int(len(F)), "runs": [], "parts": None}
     skin = {"V": V, "F": F}
     shells = {}
-    for res, mesher in [(r, m) for r in resolutions for m in MESHERS
-                        if m == "cubes" or r in LEVEL_SET_RESOLUTIONS.get(name, (1.0,)) or len(resolutions) == 1]:
-        key = f"ours {res:g} mm" + ("" if mesher == "cubes" else " level set")
+    runs = [(r, m, "faces") for r in resolutions for m in MESHERS
+            if m == "cubes" or r in LEVEL_SET_RESOLUTIONS.get(name, (1.0,)) or len(resolutions) == 1]
+    runs.append((min(resolutions), "cubes", "strip"))
+    for res, mesher, rim in runs:
+        key = f"ours {res:g} mm" + ("" if mesher == "cubes" else " level set") + ("" if rim == "faces" else " strip rim")
         try:
-            out, st = run_worker("ours", skin, tmp, keep, region=name, thickness=t, resolution=res, mesher=mesher)
+            out, st = run_worker("ours", skin, tmp, keep, region=name, thickness=t, resolution=res, mesher=mesher,
+                                 rim=rim)
             m = measure_solid(out["V"], out["F"], out["side"] == SIDE_OUTER, out["side"] == SIDE_RIM, V, F, t)
-            if mesher == "cubes":
+            if mesher == "cubes" and rim == "faces":
                 shells[res] = out
             run = {"method": key, **st, **m, "folded": None}
         except Exception as exc:
@@ -701,7 +750,7 @@ def print_run(r: dict, t: float) -> None:
     if "error" in r:
         return
     th = r["thickness"]
-    est = f" (estimated {r['estimate_s']:.1f} s)" if r.get("estimate_s") and "level set" not in r["method"] else ""
+    est = f" (estimated {r['estimate_s']:.1f} s)" if r.get("estimate_s") and r["method"].endswith(" mm") else ""
     print(f"   {r['method']}: {r['seconds']:.2f} s{est}, peak +{mem_text(r)} MB, {r['triangles']} triangles, "
           f"closed {closed_text(r['closed'])}, volume {r['closed']['volume_mm3'] / 1000:.2f} cm³, thickness "
           f"{_f(th['min'])} / {_f(th['mean'])} / {_f(th['max'])} mm on the {th['outer']} of {th['rays']} rays that "
@@ -745,7 +794,7 @@ def shell_table(rows: list[dict], t: float) -> Table:
                  ("triangles", ">"),
                  ("closed", "<"), ("volume cm³", ">"), ("t min", ">"), ("t mean", ">"), ("t max", ">"),
                  (f"< {0.95 * t:g} / rays", ">"), ("skin / wall / none", ">"),
-                 (f"folded (> {t:g} mm from border)", ">"), ("self-int. pairs", ">")])
+                 (f"folded (> {t:g} mm from border)", ">"), ("self-int. pairs", ">"), ("rim p95 / max mm", ">")])
     for row in rows:
         if "error" in row:
             tab.add_error(row["region"], row["error"])
@@ -756,7 +805,7 @@ def shell_table(rows: list[dict], t: float) -> Table:
                 tab.add_error(f"{first}: {r['method']}", r["error"])
                 continue
             th = r["thickness"]
-            est = r.get("estimate_s") if r["method"].startswith("ours") and "level set" not in r["method"] else None
+            est = r.get("estimate_s") if r["method"].startswith("ours") and r["method"].endswith(" mm") else None
             tab.add(first, r["method"], f"{r['seconds']:.2f}", "n/a" if est is None else f"{est:.1f}", cpu_text(r),
                     mem_text(r), r["triangles"],
                     closed_text(r["closed"]),
@@ -764,8 +813,12 @@ def shell_table(rows: list[dict], t: float) -> Table:
                     f"{th['thin']} / {th['rays']}", f"{th['skin']} / {th['wall']} / {th['none']}",
                     "n/a" if r.get("folded") is None
                     else f"{r['folded']} ({r['folded_far']}) of {r['offset_triangles']}",
-                    r["self_intersections"])
+                    r["self_intersections"], rim_text(r))
     return tab
+
+
+def rim_text(r: dict) -> str:
+    return "n/a" if r.get("rim_p95") is None else f"{r['rim_p95']:.3f} / {r['rim_max']:.2f}"
 
 
 def parts_table(rows: list[dict]) -> Table:
@@ -809,6 +862,10 @@ def target_lines(rows: list[dict]) -> list[str]:
                    f"{0.95 * THICKNESS_MM:g} mm in {thick} of {len(sel)}"
                    + (f" (rays that meet a rim or hole wall before {0.95 * THICKNESS_MM:g} mm: " + ", ".join(walls)
                       + ")" if walls else "") + ".")
+        smooth = [r for r in sel if r.get("rim_p95") is not None]
+        if smooth:
+            out.append(f"{label}: rim smooth (p95 of the rim residual <= {RIM_SMOOTH_MM:g} mm) in "
+                       f"{sum(r['rim_p95'] <= RIM_SMOOTH_MM for r in smooth)} of {len(smooth)} runs.")
     return out
 
 
@@ -830,7 +887,9 @@ def legend() -> str:
             "/ none: where the others end. Folded: offset-layer triangles whose normal turned against their source "
             f"face's (in brackets: those whose source face lies farther than {THICKNESS_MM:g} mm from the border). "
             "Self-intersecting pairs: `BVHTree.overlap` of the solid with itself, pairs sharing a vertex (a position) "
-            "left out")
+            "left out. Rim p95 / max: SPEC's rim smoothness, each rim-wall vertex's distance from the quadric fitted "
+            f"(least squares, principal-axes frame) to the rim-wall vertices within {RIM_RADIUS_MM:g} mm (ours: "
+            f"`SIDE_RIM` faces, hole walls included; Solidify: its rim faces); smooth at p95 <= {RIM_SMOOTH_MM:g} mm")
 
 
 def parts_legend() -> str:

@@ -8,9 +8,13 @@ The shell is the set where
   closest point, vectorised), signed by ``(x - foot) . n`` with n the pseudo-normal of the foot's
   feature (Baerentzen & Aanaes 2005: face, edge or angle-weighted vertex normal);
 * ``c`` the clearance (inner face), ``t`` the thickness (outer face), both mm from the skin;
-* ``r`` closes the rim: where the foot lies on a border edge or vertex (exact, from the
-  barycentrics), r = -(lateral distance of x from the border's normal line); elsewhere the
-  foot's distance to the border, capped at a few voxels.  Hole borders get the same wall.
+* ``r`` closes the rim.  ``rim="faces"`` (the default): where the foot lies on a border edge or
+  vertex (exact, from the barycentrics), r = -(lateral distance of x from the border's normal
+  line), elsewhere the foot's distance to the border, capped at a few voxels; the wall is then
+  the planes normal to the border faces, creased at every border vertex.  ``rim="strip"``:
+  along the outer and end loops, the signed distance to the ruled wall strip of
+  `rim_wall.RimWall` (rulings along the smoothed border normals) where the foot lies within
+  reach of those loops, capped; hole loops keep the first rule.
 
 The nearest triangle comes from libigl's AABB tree (compiled, exact); Ericson's closest point on
 that one triangle then gives the barycentrics with exact zeros on edges and vertices.
@@ -25,9 +29,14 @@ import igl  # the AABB tree: exact nearest triangles, compiled
 from scipy.spatial import cKDTree
 
 from ..mesh.boundary import boundary_loops
-from ..mesh.topology import MeshTopology, corner_angles
+from ..mesh.topology import MeshTopology
+from .rim_wall import RimWall
+from .signed_surface import closest_on_triangles, feature_normals, pseudo_normals
 
-__all__ = ["closest_on_triangles", "SkinDistance", "HOLE_FRACTION", "ACROSS_COS"]
+__all__ = ["closest_on_triangles", "SkinDistance", "HOLE_FRACTION", "ACROSS_COS", "RIMS"]
+
+#: the rim wall's rule (module docstring): the border faces' normal planes, or a ruled strip
+RIMS = ("faces", "strip")
 
 #: a border loop other than the outer one is an END, open like the outer rim, when both hold:
 #: its membrane's vector area is at least HOLE_FRACTION of the largest loop's, and the skin
@@ -40,57 +49,6 @@ HOLE_FRACTION = 0.2
 ACROSS_COS = 0.5
 
 
-def closest_on_triangles(p, a, b, c):
-    """Closest points on triangles (a, b, c) (k,3) to points p (k,3) (Ericson 5.1.5).
-
-    Returns q (k,3) and barycentrics u, v, w (k,) with q = u a + v b + w c; on an edge or a
-    vertex region the other coordinates are exactly 0."""
-    ab = b - a
-    ac = c - a
-    ap = p - a
-    d1 = np.einsum("ij,ij->i", ab, ap)
-    d2 = np.einsum("ij,ij->i", ac, ap)
-    bp = p - b
-    d3 = np.einsum("ij,ij->i", ab, bp)
-    d4 = np.einsum("ij,ij->i", ac, bp)
-    cp = p - c
-    d5 = np.einsum("ij,ij->i", ab, cp)
-    d6 = np.einsum("ij,ij->i", ac, cp)
-    va = d3 * d6 - d5 * d4
-    vb = d5 * d2 - d1 * d6
-    vc = d1 * d4 - d3 * d2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        den = va + vb + vc
-        v = vb / den
-        w = vc / den
-        m = (va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0)  # edge BC
-        wbc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        v = np.where(m, 1 - wbc, v)
-        w = np.where(m, wbc, w)
-        m = (vb <= 0) & (d2 >= 0) & (d6 <= 0)  # edge AC
-        wac = d2 / (d2 - d6)
-        v = np.where(m, 0.0, v)
-        w = np.where(m, wac, w)
-        m = (d6 >= 0) & (d5 <= d6)  # vertex C
-        v = np.where(m, 0.0, v)
-        w = np.where(m, 1.0, w)
-        m = (vc <= 0) & (d1 >= 0) & (d3 <= 0)  # edge AB
-        vab = d1 / (d1 - d3)
-        v = np.where(m, vab, v)
-        w = np.where(m, 0.0, w)
-        m = (d3 >= 0) & (d4 <= d3)  # vertex B
-        v = np.where(m, 1.0, v)
-        w = np.where(m, 0.0, w)
-        m = (d1 <= 0) & (d2 <= 0)  # vertex A
-        v = np.where(m, 0.0, v)
-        w = np.where(m, 0.0, w)
-    v = np.nan_to_num(v)
-    w = np.nan_to_num(w)
-    u = 1.0 - v - w
-    q = a * u[:, None] + b * v[:, None] + c * w[:, None]
-    return q, u, v, w
-
-
 class SkinDistance:
     """Exact nearest-point queries and the shell field (module docstring) on a skin region.
 
@@ -101,9 +59,12 @@ class SkinDistance:
     area (float mm^2).
     """
 
-    def __init__(self, V, F):
+    def __init__(self, V, F, rim: str = "faces"):
+        if rim not in RIMS:
+            raise ValueError(f"rim must be one of {RIMS}, got {rim!r}")
         self.V = V
         self.F = F
+        self.rim = rim
         self.topo = MeshTopology(V, F)
         self.A, self.B, self.C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
         fn = self._normals()
@@ -131,19 +92,9 @@ class SkinDistance:
         return fn
 
     def _pseudo_normals(self) -> None:
-        """Pseudo-normals for the sign (Baerentzen & Aanaes 2005): the face normal inside a face,
-        the sum of the two face normals on an edge (edge_pn (m,3,3): edge opposite corner j), the
-        angle-weighted normal at a vertex (vn_angle (n,3))."""
-        V, F, topo = self.V, self.F, self.topo
-        ang = corner_angles(V, F)
-        van = np.zeros_like(V)
-        for j in range(3):
-            np.add.at(van, F[:, j], self.fn * ang[:, j:j + 1])
-        self.vn_angle = van
-        ef = topo.edge_faces[topo.face_edges]  # (m,3,2): faces on edge F[j] -> F[j+1]
-        other = np.where(ef[:, :, 0] == np.arange(len(F))[:, None], ef[:, :, 1], ef[:, :, 0])  # (m,3), -1 on border
-        en = self.fn[:, None, :] + np.where(other[:, :, None] >= 0, self.fn[np.maximum(other, 0)], 0.0)
-        self.edge_pn = np.stack([en[:, 1], en[:, 2], en[:, 0]], axis=1)  # (m,3,3): edge opposite corner j
+        """Pseudo-normals for the sign (`signed_surface.pseudo_normals`): edge_pn (m,3,3) of the
+        edge opposite corner j, vn_angle (n,3) angle-weighted at the vertices."""
+        _, self.edge_pn, self.vn_angle = pseudo_normals(self.V, self.F, self.topo, self.fn)
 
     def _border(self) -> None:
         """Border flags: fborder (m,3) of the edge opposite corner j, vborder (n,) per vertex, and
@@ -197,18 +148,41 @@ class SkinDistance:
         self.end_loops = [lp for lp, e, o in zip(self.loops, end, outer) if e and not o]
 
     def _rim_samples(self) -> None:
-        """rim_pts (s,3): the border edges sampled every 0.05 mm (one far point when the region
-        has no border), and their KD-tree rim_tree."""
+        """Border samples every 0.05 mm and their KD-trees: rim_pts / rim_tree of every border
+        edge, hole_tree of the hole loops' edges, wall_tree of the outer and end loops' edges
+        (one far point where there is none).  vkind (n,) int8: 1 on a hole loop's vertices, 2 on
+        an outer or end loop's, 0 elsewhere."""
         V = self.V
-        if len(self.border_edges):
-            P, Q = V[self.border_edges[:, 0]], V[self.border_edges[:, 1]]
-            n = np.maximum(2, np.ceil(np.linalg.norm(Q - P, axis=1) / 0.05).astype(int) + 1)
-            s = np.concatenate([np.linspace(0.0, 1.0, k) for k in n])
-            e = np.repeat(np.arange(len(P)), n)
-            self.rim_pts = P[e] * (1 - s)[:, None] + Q[e] * s[:, None]
-        else:
-            self.rim_pts = np.full((1, 3), 1e12)
+        self.vkind = np.zeros(len(V), dtype=np.int8)
+        self.vkind[self.vborder] = 1
+        if self.rim == "strip":
+            for lp in self.outer_loops + self.end_loops:
+                self.vkind[lp] = 2
+        E = self.border_edges
+        self.rim_pts = self._samples(E)
         self.rim_tree = cKDTree(self.rim_pts)
+        self.hole_tree = cKDTree(self._samples(E[self.vkind[E[:, 0]] == 1])) if self.rim == "strip" else self.rim_tree
+        self.wall_tree = cKDTree(self._samples(E[self.vkind[E[:, 0]] == 2]))
+        self._walls: dict = {}
+
+    def _samples(self, E) -> np.ndarray:
+        """Points (s,3) every 0.05 mm along the edges E (e,2); one far point when E is empty."""
+        if len(E) == 0:
+            return np.full((1, 3), 1e12)
+        P, Q = self.V[E[:, 0]], self.V[E[:, 1]]
+        n = np.maximum(2, np.ceil(np.linalg.norm(Q - P, axis=1) / 0.05).astype(int) + 1)
+        s = np.concatenate([np.linspace(0.0, 1.0, k) for k in n])
+        e = np.repeat(np.arange(len(P)), n)
+        return P[e] * (1 - s)[:, None] + Q[e] * s[:, None]
+
+    def wall(self, thickness: float, rim_cap: float) -> RimWall:
+        """The rim wall strip (`rim_wall.RimWall`) of the outer and end loops for a shell of
+        ``thickness`` mm: from 2 rim_cap under the border to thickness + 3 rim_cap over it."""
+        key = (round(float(thickness), 9), round(float(rim_cap), 9))
+        if key not in self._walls:
+            self._walls[key] = RimWall(self, self.outer_loops + self.end_loops, 2 * rim_cap,
+                                       float(thickness) + 3 * rim_cap)
+        return self._walls[key]
 
     def _triangle_trees(self) -> None:
         """cent_tree: a KD-tree of the triangle centres (fast band tests far from the skin, where a
@@ -251,6 +225,14 @@ class SkinDistance:
     # ------------------------------------------------------------------ field
     def terms(self, X, thickness: float, clearance: float, rim_cap: float):
         """The three terms of the field at X (k,3): (sd - c, t - sd, r), each (k,)."""
+        return self.terms_and_feet(X, thickness, clearance, rim_cap)[:3]
+
+    def terms_and_feet(self, X, thickness: float, clearance: float, rim_cap: float):
+        """The three terms (sd - c, t - sd, r) (k,) each, and where each term's zero surface is
+        nearest X (k,3) along its gradient (k,3) each: Q + c g and Q + t g on the inner and
+        outer faces (Q the foot, g the unit gradient of sd: (X - Q) / sd, the skin's normal
+        where X is on the skin), the wall strip's closest point where r is the wall's
+        (NaN where it is a hole's term or the cap)."""
         d, Q, FI, BC = self.nearest(X)
         Fv = self.F[FI]
         N = (self.vn[Fv[:, 0]] * BC[:, :1] + self.vn[Fv[:, 1]] * BC[:, 1:2] + self.vn[Fv[:, 2]] * BC[:, 2:3])
@@ -260,27 +242,58 @@ class SkinDistance:
         diff = X - Q
         h = np.einsum("ij,ij->i", diff, N)
         # sign from the pseudo-normal of the foot's feature (exact zeros / ones from Ericson)
-        PN = self.fn[FI].copy()
-        for j in range(3):
-            on_e = BC[:, j] == 0.0
-            PN[on_e] = self.edge_pn[FI[on_e], j]
-        for j in range(3):
-            on_v = BC[:, j] == 1.0
-            PN[on_v] = self.vn_angle[Fv[on_v, j]]
+        PN = feature_normals(FI, BC, self.F, self.fn, self.edge_pn, self.vn_angle)
         sd = np.where(np.einsum("ij,ij->i", diff, PN) >= 0, d, -d)
+        kind = self._foot_border_kind(FI, Fv, BC)
+        r_hole = self._hole_term(kind == 1, diff, h, N, Q, rim_cap)
+        r_wall, C = self._wall_term(X, Q, kind == 2, thickness, rim_cap)
+        g = np.where((d > 1e-9)[:, None], diff / np.where(sd == 0, 1.0, sd)[:, None], N)
+        C[~((r_wall < r_hole) & (np.abs(r_wall) < rim_cap))] = np.nan
+        return (sd - clearance, thickness - sd, np.minimum(r_hole, r_wall),
+                Q + clearance * g, Q + thickness * g, C)
+
+    def _foot_border_kind(self, FI, Fv, BC) -> np.ndarray:
+        """(k,) int8: `vkind` of the border edge or vertex a foot lies on (exact zeros / ones of
+        the barycentrics BC (k,3) on faces FI, corners Fv (k,3)), 0 for a foot off the border."""
         eps = 1e-9
-        on_rim = np.zeros(len(X), dtype=bool)
+        kind = np.zeros(len(FI), dtype=np.int8)
         for j in range(3):
-            on_rim |= (BC[:, j] < eps) & self.fborder[FI, j]
-            on_rim |= (BC[:, j] > 1 - eps) & self.vborder[Fv[:, j]]
-        lat = np.linalg.norm(diff - h[:, None] * N, axis=1)
-        drim = np.full(len(X), rim_cap)
-        near = ~on_rim
+            on_e = (BC[:, j] < eps) & self.fborder[FI, j]
+            kind[on_e] = self.vkind[Fv[on_e, (j + 1) % 3]]
+            on_v = (BC[:, j] > 1 - eps) & self.vborder[Fv[:, j]]
+            kind[on_v] = self.vkind[Fv[on_v, j]]
+        return kind
+
+    def _hole_term(self, on_hole, diff, h, N, Q, rim_cap) -> np.ndarray:
+        """The holes' rim term (k,): -(lateral distance from the border's normal line) where the
+        foot is on a hole's border, else the foot's distance to the holes' borders, capped."""
+        r = np.full(len(Q), rim_cap)
+        if not (self.vkind == 1).any():
+            return r
+        near = ~on_hole
         if near.any():
-            dr, _ = self.rim_tree.query(Q[near], workers=2, distance_upper_bound=rim_cap)
-            drim[near] = np.minimum(dr, rim_cap)
-        r = np.where(on_rim, -lat, drim)
-        return sd - clearance, thickness - sd, r
+            dr, _ = self.hole_tree.query(Q[near], workers=2, distance_upper_bound=rim_cap)
+            r[near] = np.minimum(dr, rim_cap)
+        lat = np.linalg.norm(diff[on_hole] - h[on_hole, None] * N[on_hole], axis=1)
+        r[on_hole] = -lat
+        return r
+
+    def _wall_term(self, X, Q, on_wall, thickness, rim_cap) -> np.ndarray:
+        """The outer and end loops' rim term (k,): the wall strip's signed distance clipped to
+        +-rim_cap where the foot Q lies within rim_cap + thickness / 4 of those loops (the strip
+        may lean out of the plane normal to the border face by some degrees), rim_cap elsewhere;
+        and the strip's closest points (k,3) (NaN where not asked)."""
+        r = np.full(len(X), rim_cap)
+        C = np.full((len(X), 3), np.nan)
+        if not (self.vkind == 2).any():
+            return r, C
+        reach = rim_cap + 0.25 * thickness
+        dw, _ = self.wall_tree.query(Q, workers=2, distance_upper_bound=reach)
+        cand = np.nonzero(np.isfinite(dw) | on_wall)[0]
+        if len(cand):
+            s, C[cand] = self.wall(thickness, rim_cap).signed(X[cand])
+            r[cand] = np.clip(s, -rim_cap, rim_cap)
+        return r, C
 
     def field(self, X, thickness: float, clearance: float, rim_cap: float):
         """f(X) (k,) of the module docstring: positive inside the shell."""

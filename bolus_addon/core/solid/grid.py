@@ -16,7 +16,9 @@ import numpy as np
 import manifold3d as m3
 
 from ..errors import BolusError
-from .marching import marching_manifold_on
+from .creases import sharpen_creases
+from .manifold import to_manifold
+from .marching import marching_cubes_on
 from .narrow_band import field_narrow_band
 
 __all__ = ["_Grid", "_coarse_terms", "_field_coarse_to_fine", "_level_set_fast", "_tight_box",
@@ -219,11 +221,19 @@ def _solid_on_grid(skin, grid, t, c, progress, stats, mesher: str = "cubes"):
     _progress(progress, p_mid, "marching cubes" if mesher == "cubes" else "level set")
     T1 = time.process_time()
     if mesher == "cubes":
-        M = marching_manifold_on(cubes, fields[0], grid.lo, grid.sp)
+        V, F = marching_cubes_on(cubes, fields[0], grid.lo, grid.sp)
     else:
         M = _level_set_fast(grid, *fields)
     del fields
     stats["level_set_s"] = stats.get("level_set_s", 0.0) + time.process_time() - T1
+    if mesher == "cubes" and skin.rim == "strip":
+        _progress(progress, p_mid + 0.1, "sharp creases")
+        T1 = time.process_time()
+        V, F, figures = sharpen_creases(skin, V, F, t, c, rim_cap, float(grid.sp.max()))
+        stats.update(figures)
+        stats["creases_s"] = stats.get("creases_s", 0.0) + time.process_time() - T1
+    if mesher == "cubes":
+        M = to_manifold(V, F, "the marched solid")
     stats["mesher"] = mesher
     if str(M.status()).split(".")[-1] != "NoError" or M.is_empty():
         raise BolusError(f"the volume step failed ({mesher}: {M.status()}); try a coarser resolution")

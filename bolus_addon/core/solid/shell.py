@@ -129,7 +129,7 @@ def _fmt(p):
 
 # ---------------------------------------------------------------------------- make_shell
 def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=None, progress=None,
-               time_limit_s=None, mesher="cubes", _saw_retry=True) -> Shell:
+               time_limit_s=None, mesher="cubes", rim="faces", _saw_retry=True) -> Shell:
     """A closed bolus solid on the skin region V (n,3) mm, F (m,3) (an open surface whose face
     normals point away from the body; the shell grows on that side).
 
@@ -144,6 +144,9 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     much as the largest loop's (`distance_field.HOLE_FRACTION`): then it is an end, open like the
     outer rim (a sleeve's two ends).  mesher: "cubes" (marching cubes) or
     "level_set" (manifold3d's level set, the slower peer of the benchmarks; `grid.MESHERS`).
+    rim: the rim wall's rule (`distance_field.RIMS`): "faces" (the planes normal to the border
+    faces) or "strip" (a ruled strip along the smoothed border normals, with the marched creases
+    made sharp by `creases.sharpen_creases`; smoother, slower: docs/design/solid.md).
     Returns a `Shell`.
     """
     check_shell_request(thickness, clearance, resolution)
@@ -156,7 +159,7 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     if _saw_retry:
         progress = Deadline(progress, budget_s(time_limit_s), "Make Bolus",
                             "choose a coarser resolution or select a smaller region")
-    skin = SkinDistance(V, F)
+    skin = SkinDistance(V, F, rim)
     check_shell_request(t, c, res, skin.area)
     _check_region(skin)
     warnings: list[str] = []
@@ -180,7 +183,7 @@ def make_shell(V, F, thickness=10.0, clearance=0.0, resolution=0.5, *, others=No
     tmin, tmean, tmax = _thickness_figures(th, rays, spot, t - c, warnings)
     topo_warnings = _topology_warnings(skin, M)
     if _saw_retry and topo_warnings and "more tunnel" in topo_warnings[0]:
-        again = _again_without_teeth(V, F, t, c, res, others, progress, time_limit_s, mesher)
+        again = _again_without_teeth(V, F, t, c, res, others, progress, time_limit_s, mesher, rim)
         if again is not None:
             return again
     warnings += topo_warnings
@@ -327,7 +330,7 @@ def _thickness_figures(th, rays, spot, wall, warnings) -> tuple[float, float, fl
     return tmin, tmean, tmax
 
 
-def _again_without_teeth(V, F, t, c, res, others, progress, time_limit_s, mesher="cubes"):
+def _again_without_teeth(V, F, t, c, res, others, progress, time_limit_s, mesher="cubes", rim="faces"):
     """The shell made once more without the border's saw teeth (`drop_border_ears`: triangles
     with two border edges, whose pleated rim wall leaves tiny tunnels), its first warning naming
     them; None when the border has no teeth."""
@@ -336,6 +339,7 @@ def _again_without_teeth(V, F, t, c, res, others, progress, time_limit_s, mesher
         return None
     _progress(progress, 0.5, f"again without the border's {ears} saw teeth")
     again = make_shell(V, F2, t, c, res, others=others, _saw_retry=False, time_limit_s=time_limit_s, mesher=mesher,
+                       rim=rim,
                        progress=None if progress is None else (lambda f, text: progress(0.5 + 0.5 * f, text)))
     size = float(np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).max())
     again.warnings.insert(0, f"the region's border zigzags along whole triangles: its {ears} teeth (triangles "
