@@ -5,7 +5,7 @@ import manifold3d as m3
 import numpy as np
 
 from ..mesh.topology import as_mesh_arrays
-from .manifold import SIDE_INNER, from_manifold, ray_thickness, to_manifold
+from .manifold import SIDE_INNER, from_manifold, ray_thickness, to_manifold, weld_short_edges
 
 #: skin of the rest of the body deeper than this (or one voxel) inside the shell is a collision
 COLLISION_TOL_MM = 1.0
@@ -212,8 +212,10 @@ def _drop_crumbs(M):
     return M, [float(v) for v in vols[~keep]]
 
 
-#: mm: edges whose collapse moves the surface by less than this are collapsed first
+#: mm: edges shorter than this are collapsed first (`manifold.weld_short_edges`)
 SLIVER_TOL_MM = 1e-3
+#: mm: `Manifold.simplify` merges triangles that are coplanar (and edges collinear) to this
+COPLANAR_TOL_MM = 1e-7
 
 
 def _clean(M):
@@ -222,11 +224,18 @@ def _clean(M):
     Marching cubes leaves tiny triangles where the surface passes within a hair of a lattice
     point, and a boolean with a hole channel can then leave two of them 1e-5 mm apart, which
     Blender's BVH overlap test (the 3D-Print Toolbox's intersection check) reports as
-    intersecting: `Manifold.simplify` collapses every edge whose removal moves the surface by
-    less than `SLIVER_TOL_MM`.  manifold3d's output can also hold coincident vertices that it
-    collapses when the arrays are read back, which can pinch off more crumbs, so round-trip
+    intersecting: edges shorter than `SLIVER_TOL_MM` are collapsed.  `Manifold.simplify` merges
+    the triangles that lie in one plane (a face of the skin and its offset: most of a coarse
+    skin's solid) to `COPLANAR_TOL_MM`; with a tolerance of a micrometre it also collapsed
+    triangles across the skin's folds, and the tilted triangles crossed each other (2 to 7 pairs
+    on the bench regions at 0.5 mm).  manifold3d's output can also hold coincident vertices that
+    it collapses when the arrays are read back, which can pinch off more crumbs, so round-trip
     until reading back changes nothing.  Returns (Manifold, V, F, dropped volumes, pieces)."""
-    M = M.simplify(SLIVER_TOL_MM)
+    M = M.simplify(COPLANAR_TOL_MM)
+    V, F = from_manifold(M)
+    V2, F2, _ = weld_short_edges(V, F, SLIVER_TOL_MM)
+    if len(F2) != len(F):
+        M = to_manifold(V2, F2, "the shell")
     dropped = []
     for _ in range(4):
         M, d = _drop_crumbs(M)

@@ -589,26 +589,40 @@ def test_topology_warning_counts_extra_tunnels():
     assert "1 fewer tunnel" in w and "Euler characteristic 4, 2 expected" in w
 
 
-def test_clean_collapses_slivers_a_hair_off_the_surface():
-    """A cube whose top face is fanned from a vertex 1e-4 mm above it (the tiny triangles marching
-    cubes leaves near a lattice point): cleaning collapses that vertex, the volume stays."""
+def _cube_with_fanned_top(apex):
+    """A 10 mm cube whose top face is fanned from the vertex ``apex`` (3,) (the tiny or flat
+    triangles marching cubes leaves near a lattice point): (V, F)."""
     import manifold3d as m3
 
-    from bolus_addon.core.solid.manifold import from_manifold, to_manifold
-    from bolus_addon.core.solid.shell_checks import SLIVER_TOL_MM, _clean
+    from bolus_addon.core.solid.manifold import from_manifold
 
     V, F = from_manifold(m3.Manifold.cube([10.0, 10.0, 10.0]))
     top = [i for i, f in enumerate(F) if np.all(V[f, 2] == 10.0)]
     ring = list(np.nonzero(V[:, 2] == 10.0)[0])
     c = len(V)
-    V = np.vstack([V, [5.0, 5.0, 10.0 + SLIVER_TOL_MM / 10]])
+    V = np.vstack([V, apex])
     ring = sorted(ring, key=lambda v: np.arctan2(V[v, 1] - 5, V[v, 0] - 5))  # counter-clockwise seen from +z
     F = np.vstack([np.delete(F, top, axis=0), [[ring[k], ring[(k + 1) % 4], c] for k in range(4)]])
-    M = to_manifold(V, F)
-    assert M.num_vert() == 9
-    M2, V2, F2, dropped, pieces = _clean(M)
-    assert len(V2) == 8 and pieces == 1 and not dropped
-    assert M2.volume() == pytest.approx(1000.0, abs=1e-6)
+    return V, F
+
+
+def test_clean_merges_coplanar_fans_and_collapses_short_edges():
+    """Cleaning merges a fan that lies in its face's plane and collapses a vertex closer than
+    SLIVER_TOL_MM to a corner (a sliver); a vertex a hair off the plane but far from every other
+    stays (merging such near-planar fans to a micrometre also merged triangles across the skin's
+    folds, and the tilted ones crossed each other); the volume stays."""
+    from bolus_addon.core.solid.manifold import to_manifold
+    from bolus_addon.core.solid.shell_checks import SLIVER_TOL_MM, _clean
+
+    cases = {"flat": ([5.0, 5.0, 10.0], 8), "sliver": ([SLIVER_TOL_MM / 10, 0.0, 10.0], 8),
+             "tent": ([5.0, 5.0, 10.0 + SLIVER_TOL_MM / 10], 9)}
+    for name, (apex, verts) in cases.items():
+        V, F = _cube_with_fanned_top(apex)
+        M = to_manifold(V, F)
+        assert M.num_vert() == 9, name
+        M2, V2, F2, dropped, pieces = _clean(M)
+        assert len(V2) == verts and pieces == 1 and not dropped, name
+        assert M2.volume() == pytest.approx(1000.0, abs=1e-2), name
 
 
 @pytest.mark.parametrize("name", ["makehuman_elbow_patch.obj", "makehuman_knee_patch.obj"])
