@@ -38,6 +38,13 @@ class _Faces:
         a, b, r, Pi, Po, Pw = self.skin.terms_and_feet(X, *self.args)
         return np.stack([a, b, r], axis=1), np.stack([Pi, Po, Pw], axis=1)
 
+    def near_wall(self, X):
+        """(k,) bool: points X (k,3) close enough to the outer and end loops to lie at a crease of
+        the wall (within 1.5 t + 3 cap of their border)."""
+        t, _, cap = self.args
+        d, _ = self.skin.wall_tree.query(X, workers=2, distance_upper_bound=1.5 * t + 3 * cap)
+        return np.isfinite(d)
+
     def project(self, X, face):
         """X (k,3) moved onto face (k,) of {0, 1, 2}; unmoved where that face has no point."""
         _, P = self(X)
@@ -67,12 +74,18 @@ def _vertices_on_faces(faces, V, res):
     interpolation on a lattice edge is within O(res^2 / radius) of a smooth face, and moving
     them can fold the marched triangles): (V (n,3), labels (n,), masks (n,))."""
     tol = 1e-3 * res
-    vals, P = faces(V)
+    near = faces.near_wall(V)
+    vals = np.full((len(V), 3), np.inf)
+    vals[~near, :2] = 0.0  # far from the rim: on the inner or the outer face, never at a crease
+    P = np.zeros((0, 3, 3))
+    if near.any():
+        vals[near], P = faces(V[near])
     lab = np.argmin(vals, axis=1)
-    second = np.sort(np.abs(vals), axis=1)[:, 1]
-    idx = np.nonzero(second < 1.5 * res)[0]
+    second = np.sort(np.abs(vals[near]), axis=1)[:, 1]
+    idx = np.nonzero(near)[0][second < 1.5 * res]
+    P = P[second < 1.5 * res]
     if len(idx):
-        Y = P[idx, lab[idx]]
+        Y = P[np.arange(len(idx)), lab[idx]]
         X = np.where(np.isfinite(Y).all(axis=1)[:, None], Y, V[idx])
         cv, _ = faces(X)
         others = cv.copy()
@@ -95,9 +108,10 @@ def _crease_midpoints(faces, V, F, lab, mask, res):
     """Step 2: the mixed edges (e,2) (ends with no face in common), their crease points (e,3),
     and which were accepted (e,)."""
     E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    E = np.unique(E, axis=0)
-    mixed = (mask[E[:, 0]] & mask[E[:, 1]]) == 0
-    E = E[mixed]
+    E = E[(mask[E[:, 0]] & mask[E[:, 1]]) == 0]  # each mixed edge twice, once from each face
+    n = np.int64(len(V))
+    key = np.unique(E[:, 0].astype(np.int64) * n + E[:, 1])
+    E = np.stack([key // n, key % n], axis=1)
     if len(E) == 0:
         return E, np.zeros((0, 3)), np.zeros(0, dtype=bool)
     m0 = 0.5 * (V[E[:, 0]] + V[E[:, 1]])
@@ -171,20 +185,25 @@ def sharpen_creases(skin, V, F, t, c, cap, res):
         back = np.unique(F[turned])
         V[back] = V0[back]
     E, X, ok = _crease_midpoints(faces, V, F, lab, mask, res)
+    # only the faces with a vertex on a mixed edge can change
+    touched = np.zeros(len(V), dtype=bool)
+    touched[E.ravel()] = True
+    A = touched[F].any(axis=1)
+    FA = F[A]
+    n = np.int64(len(V))
     for _ in range(20):  # each round leaves more edges whole: it ends
-        V2, F2, parent = _split(V, F, E, X, ok)
-        bad = _turned(V, F, V2, F2, parent)
+        V2, F2, parent = _split(V, FA, E, X, ok)
+        bad = _turned(V, FA, V2, F2, parent)
         if not bad.any():
             break
         # the edges of the parents of turned triangles stay whole
-        Fb = F[np.unique(parent[bad])]
-        Eb = np.unique(np.sort(np.concatenate([Fb[:, [0, 1]], Fb[:, [1, 2]], Fb[:, [2, 0]]]), axis=1), axis=0)
-        n = len(V)
-        kb = Eb[:, 0].astype(np.int64) * n + Eb[:, 1]
-        ok &= ~np.isin(E[:, 0].astype(np.int64) * n + E[:, 1], kb)
+        Fb = FA[np.unique(parent[bad])]
+        Eb = np.sort(np.concatenate([Fb[:, [0, 1]], Fb[:, [1, 2]], Fb[:, [2, 0]]]), axis=1)
+        ok &= ~np.isin(E[:, 0].astype(np.int64) * n + E[:, 1], Eb[:, 0].astype(np.int64) * n + Eb[:, 1])
     else:
         ok[:] = False
-        V2, F2, parent = _split(V, F, E, X, ok)
+        V2, F2, parent = _split(V, FA, E, X, ok)
+    F2 = np.concatenate([F[~A], F2])
     figures = {"crease_vertices": int(((mask & (mask - 1)) != 0).sum()),
                "crease_edges_split": int(ok.sum()), "crease_edges_whole": int((~ok).sum()),
                "faces_turned_back": int(turned.sum())}
