@@ -17,7 +17,8 @@ import manifold3d as m3
 
 from ..errors import BolusError
 from .creases import sharpen_creases
-from .manifold import to_manifold
+from .manifold import from_manifold, to_manifold
+from .shell_checks import COPLANAR_TOL_MM
 from .marching import marching_cubes_on
 from .narrow_band import field_narrow_band
 
@@ -226,13 +227,17 @@ def _solid_on_grid(skin, grid, t, c, progress, stats, mesher: str = "cubes"):
         M = _level_set_fast(grid, *fields)
     del fields
     stats["level_set_s"] = stats.get("level_set_s", 0.0) + time.process_time() - T1
+    if mesher == "cubes":
+        M = to_manifold(V, F, "the marched solid")
+    # the triangles the mesher leaves in one plane (a face of the skin and its offset: most of a
+    # coarse skin's solid) merged before anything else reads them
+    M = M.simplify(COPLANAR_TOL_MM)
     if mesher == "cubes" and skin.rim == "strip":
         _progress(progress, p_mid + 0.1, "sharp creases")
         T1 = time.process_time()
-        V, F, figures = sharpen_creases(skin, V, F, t, c, rim_cap, float(grid.sp.max()))
+        V, F, figures = sharpen_creases(skin, *from_manifold(M), t, c, rim_cap, float(grid.sp.max()))
         stats.update(figures)
         stats["creases_s"] = stats.get("creases_s", 0.0) + time.process_time() - T1
-    if mesher == "cubes":
         M = to_manifold(V, F, "the marched solid")
     stats["mesher"] = mesher
     if str(M.status()).split(".")[-1] != "NoError" or M.is_empty():

@@ -65,8 +65,9 @@ def _vertex_normals(V, F):
 
 
 def _measure_thickness(skin, M, V, F, side, t, c, res, max_rays=1500):
-    """SPEC thickness: rays from inner-face vertices along the inner face's normal (into the
-    material) to the outer face, on inner points farther than t from the rim.
+    """SPEC thickness: rays from inner-face points (vertices and triangle centroids) along the
+    inner face's normal (into the material) to the outer face, on points farther than t from the
+    rim.
     Returns (thicknesses of the rays that exit through the outer face, counts {"rays",
     "outer", "skin": met the inner face again across a valley or cavity the bolus fills (beside
     the nose, a nostril pocket), "wall": left through the rim or a hole channel, "none": no hit
@@ -78,18 +79,25 @@ def _measure_thickness(skin, M, V, F, side, t, c, res, max_rays=1500):
     vn = _vertex_normals(V, Fi)  # outward normal of the inner face points into the body
     verts = np.unique(Fi)
     verts = verts[np.linalg.norm(vn[verts], axis=1) > 0.5]  # a crease's faces can cancel: no normal there
-    if len(verts) == 0:
+    # the inner face's points: its vertices with their normals and its triangles' centroids with
+    # theirs (where coplanar triangles were merged, a face of the skin has vertices only at its
+    # corners, near the rim on a coarse skin)
+    fn = np.cross(V[Fi[:, 1]] - V[Fi[:, 0]], V[Fi[:, 2]] - V[Fi[:, 0]])
+    big = np.linalg.norm(fn, axis=1) > 1e-12
+    P = np.concatenate([V[verts], V[Fi[big]].mean(axis=1)])
+    N = np.concatenate([vn[verts], fn[big] / np.linalg.norm(fn[big], axis=1)[:, None]])
+    if len(P) == 0:
         return np.zeros(0), {"rays": 0, "outer": 0, "skin": 0, "wall": 0, "none": 0}, None
     # bounded: a point beyond t reads inf, and the tree stops early (unbounded, the query of a
     # 757k-triangle shell's inner vertices against a long rim took seconds)
-    drim, _ = skin.rim_tree.query(V[verts], workers=2, distance_upper_bound=t)
-    cand = verts[~np.isfinite(drim)]
+    drim, _ = skin.rim_tree.query(P, workers=2, distance_upper_bound=t)
+    cand = np.nonzero(~np.isfinite(drim))[0]
     if len(cand) == 0:
-        cand = verts[drim >= np.max(drim) * 0.5]
+        cand = np.nonzero(drim >= np.max(drim) * 0.5)[0]
     if len(cand) > max_rays:
         cand = cand[np.linspace(0, len(cand) - 1, max_rays).round().astype(int)]
-    O = V[cand]
-    D = -vn[cand]
+    O = P[cand]
+    D = -N[cand]
     L = 5.0 * t + 2 * res  # along the normal a filled valley is up to 4 t thick
     dist, pts = ray_thickness(V, F, O, D, L, min_mm=1e-3, return_points=True)
     hit = np.isfinite(dist)
@@ -224,14 +232,14 @@ def _clean(M):
     Marching cubes leaves tiny triangles where the surface passes within a hair of a lattice
     point, and a boolean with a hole channel can then leave two of them 1e-5 mm apart, which
     Blender's BVH overlap test (the 3D-Print Toolbox's intersection check) reports as
-    intersecting: edges shorter than `SLIVER_TOL_MM` are collapsed.  `Manifold.simplify` merges
-    the triangles that lie in one plane (a face of the skin and its offset: most of a coarse
-    skin's solid) to `COPLANAR_TOL_MM`; with a tolerance of a micrometre it also collapsed
-    triangles across the skin's folds, and the tilted triangles crossed each other (2 to 7 pairs
-    on the bench regions at 0.5 mm).  manifold3d's output can also hold coincident vertices that
-    it collapses when the arrays are read back, which can pinch off more crumbs, so round-trip
-    until reading back changes nothing.  Returns (Manifold, V, F, dropped volumes, pieces)."""
-    M = M.simplify(COPLANAR_TOL_MM)
+    intersecting: edges shorter than `SLIVER_TOL_MM` are collapsed (a `Manifold.simplify` to a
+    micrometre, as before, also collapsed triangles across the skin's folds, and the tilted
+    triangles crossed each other: 2 to 7 pairs on the bench regions at 0.5 mm; the marched
+    solid's coplanar triangles are merged in `grid` to `COPLANAR_TOL_MM`, before the holes and the
+    creases, since merging after them pulls crease vertices off their crease).  manifold3d's
+    output can also hold coincident vertices that it collapses when the arrays are read back,
+    which can pinch off more crumbs, so round-trip until reading back changes nothing.
+    Returns (Manifold, V, F, dropped volumes, pieces)."""
     V, F = from_manifold(M)
     V2, F2, _ = weld_short_edges(V, F, SLIVER_TOL_MM)
     if len(F2) != len(F):
