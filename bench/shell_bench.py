@@ -73,7 +73,9 @@ segmentation of its skin (``print_segment(skin, 3, rng=0)``) with peg/hole conne
 (clearance 0.2 mm): the time of ``split_solid``, each part closed?, the parts' volumes
 against the shell's, and the total support volume (SPEC) of the parts, each in its best
 orientation (``print_orientation.orient``), against the whole shell's in its own best
-orientation.
+orientation; each part written as a binary STL and read by admesh (where installed): one shell
+needing no repair (no degenerate facet, edge fixed, facet removed, added or reversed, backwards
+edge or normal fixed).
 
 Meshes come from the repository's ``assets/`` and ``tests/data/``.
 """
@@ -705,15 +707,54 @@ def parts_figures(out: dict, shell: dict) -> dict:
     from bolus_addon.core.solid.manifold import closed_report
     from bolus_addon.core.mesh.topology import submesh
 
-    closed, vols = [], []
+    closed, vols, repairs = [], [], []
     for p in np.unique(out["labels"]):
         Fp, ids = submesh(out["F"], out["labels"] == p)
         rep = closed_report(out["V"][ids], Fp)
         closed.append(bool(rep["closed"]))
         vols.append(float(rep["volume_mm3"]))
+        repairs.append(admesh_repairs(out["V"][ids], Fp))
     whole = closed_report(shell["V"], shell["F"])["volume_mm3"]
     return {"part_count": len(vols), "parts_closed": closed, "part_volumes_measured_mm3": vols,
-            "shell_volume_mm3": float(whole), "volume_sum_ratio": float(sum(vols) / whole) if whole else None}
+            "shell_volume_mm3": float(whole), "volume_sum_ratio": float(sum(vols) / whole) if whole else None,
+            "admesh": repairs}
+
+
+#: admesh's repair counts that a part needing no repair has at 0 (and "Number of parts" at 1)
+ADMESH_COUNTS = ("Degenerate facets", "Edges fixed", "Facets removed", "Facets added", "Facets reversed",
+                 "Backwards edges", "Normals fixed")
+
+
+def admesh_repairs(V, F) -> dict | None:
+    """A part written as a binary float32 STL (what export_parts writes) and read by admesh, the
+    slicers' STL checker, where installed: {"parts": its count of shells, "repairs": the sum of
+    `ADMESH_COUNTS`}; None without admesh."""
+    import re
+    import shutil
+    import subprocess
+    import tempfile
+
+    import numpy as np
+
+    exe = shutil.which("admesh")
+    if exe is None:
+        return None
+    T = np.asarray(V, dtype=np.float64)[np.asarray(F)].astype(np.float32)
+    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1), 1e-30)[:, None]
+    rec = np.zeros(len(T), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
+    rec["n"], rec["v"] = n, T
+    with tempfile.TemporaryDirectory() as d:
+        path = f"{d}/part.stl"
+        with open(path, "wb") as f:
+            f.write(b"\0" * 80 + np.uint32(len(T)).tobytes() + rec.tobytes())
+        text = subprocess.run([exe, path], capture_output=True, text=True, timeout=600).stdout
+
+    def count(label):
+        m = re.search(re.escape(label) + r"\s*:\s*(\d+)", text)
+        return int(m.group(1)) if m else -1
+
+    return {"parts": count("Number of parts"), "repairs": sum(count(k) for k in ADMESH_COUNTS)}
 
 
 # ----------------------------------------------------------------------------- output
@@ -776,7 +817,7 @@ def print_parts(p: dict) -> None:
           f"{sum(p['parts_closed'])}/{p['part_count']}, volumes {pct_text(p['volume_sum_ratio'])} of the shell's, "
           f"{sum(j['connectors'] for j in p['joints'])} connectors on {len(p['joints'])} joints; support "
           f"{sum(p['parts_support_mm3']):.0f} mm³ (parts, each in its best orientation) against "
-          f"{p['whole_support_mm3']:.0f} mm³ (whole shell)")
+          f"{p['whole_support_mm3']:.0f} mm³ (whole shell); admesh: {admesh_text(p)} parts one shell, no repair")
     for j in p["joints"]:
         if j["note"]:
             print(f"     joint {j['parts']}: {j['note']}")
@@ -824,7 +865,7 @@ def rim_text(r: dict) -> str:
 def parts_table(rows: list[dict]) -> Table:
     tab = Table([("region", "<"), ("shell", ">"), ("parts", ">"), ("split s", ">"), ("cpu s", ">"), ("peak MB", ">"),
                  ("closed", ">"), ("Σ volume / shell", ">"), ("connectors", ">"), ("support parts mm³", ">"),
-                 ("support whole mm³", ">"), ("ratio", ">")])
+                 ("support whole mm³", ">"), ("ratio", ">"), ("admesh: no repair", ">")])
     for row in rows:
         p = row.get("parts") if "error" not in row else None
         if not p:
@@ -837,8 +878,16 @@ def parts_table(rows: list[dict]) -> Table:
                 mem_text(p),
                 f"{sum(p['parts_closed'])}/{p['part_count']}", pct_text(p["volume_sum_ratio"]),
                 sum(j["connectors"] for j in p["joints"]), f"{sp:.0f}", f"{sw:.0f}",
-                f"{sp / sw:.2f}" if sw > 0 else "n/a")
+                f"{sp / sw:.2f}" if sw > 0 else "n/a", admesh_text(p))
     return tab
+
+
+def admesh_text(p: dict) -> str:
+    """'k/n': parts that admesh reads as one shell needing no repair; n/a without admesh."""
+    checks = [a for a in p.get("admesh", []) if a is not None]
+    if not checks:
+        return "n/a"
+    return f"{sum(a['parts'] == 1 and a['repairs'] == 0 for a in checks)}/{len(checks)}"
 
 
 def target_lines(rows: list[dict]) -> list[str]:
@@ -897,7 +946,9 @@ def parts_legend() -> str:
             f"(`print_segment(skin, {PARTS}, rng=0)`) by `core.solid_parts.split_solid` (SVM planes, peg/hole "
             f"connectors, clearance {PARTS_CLEARANCE_MM:g} mm); split s = `split_solid` alone; closed: per part; "
             "support (SPEC: projected overhang area x height) of the parts, each in its best orientation "
-            "(`print_orientation.orient`), against the whole shell's in its own best orientation")
+            "(`print_orientation.orient`), against the whole shell's in its own best orientation; admesh: parts "
+            "that admesh (the slicers' STL checker, where installed) reads from a binary STL as one shell needing no "
+            "repair")
 
 
 def markdown(rows: list[dict], argv) -> str:
