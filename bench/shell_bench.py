@@ -74,8 +74,8 @@ segmentation of its skin (``print_segment(skin, 3, rng=0)``) with peg/hole conne
 against the shell's, and the total support volume (SPEC) of the parts, each in its best
 orientation (``print_orientation.orient``), against the whole shell's in its own best
 orientation; each part written as a binary STL and read by admesh (where installed): one shell
-needing no repair (no degenerate facet, edge fixed, facet removed, added or reversed, backwards
-edge or normal fixed).
+needing no repair (no degenerate facet, edge fixed, facet removed, added or reversed, or backwards
+edge; the stored normals it recomputes are counted apart).
 
 Meshes come from the repository's ``assets/`` and ``tests/data/``.
 """
@@ -707,28 +707,36 @@ def parts_figures(out: dict, shell: dict) -> dict:
     from bolus_addon.core.solid.manifold import closed_report
     from bolus_addon.core.mesh.topology import submesh
 
+    from bolus_addon.core.solid.manifold import weld_short_edges
+
     closed, vols, repairs = [], [], []
+    PV, PF, keep = weld_short_edges(out["V"], out["F"])  # as Split into Print Parts leaves them
+    labels = np.asarray(out["labels"])[keep]
+    for p in np.unique(labels):
+        Fw, ids = submesh(PF, labels == p)
+        repairs.append(admesh_repairs(PV[ids], Fw))
     for p in np.unique(out["labels"]):
         Fp, ids = submesh(out["F"], out["labels"] == p)
         rep = closed_report(out["V"][ids], Fp)
         closed.append(bool(rep["closed"]))
         vols.append(float(rep["volume_mm3"]))
-        repairs.append(admesh_repairs(out["V"][ids], Fp))
     whole = closed_report(shell["V"], shell["F"])["volume_mm3"]
     return {"part_count": len(vols), "parts_closed": closed, "part_volumes_measured_mm3": vols,
             "shell_volume_mm3": float(whole), "volume_sum_ratio": float(sum(vols) / whole) if whole else None,
             "admesh": repairs}
 
 
-#: admesh's repair counts that a part needing no repair has at 0 (and "Number of parts" at 1)
+#: admesh's repair counts that a part needing no repair has at 0 (and "Number of parts" at 1); its
+#: "Normals fixed" counts stored normals it recomputes (every slicer recomputes them from the
+#: corners; on a tiny triangle two float32 cross products can differ), reported apart
 ADMESH_COUNTS = ("Degenerate facets", "Edges fixed", "Facets removed", "Facets added", "Facets reversed",
-                 "Backwards edges", "Normals fixed")
+                 "Backwards edges")
 
 
 def admesh_repairs(V, F) -> dict | None:
     """A part written as a binary float32 STL (what export_parts writes) and read by admesh, the
     slicers' STL checker, where installed: {"parts": its count of shells, "repairs": the sum of
-    `ADMESH_COUNTS`}; None without admesh."""
+    `ADMESH_COUNTS`, "counts": the ones not 0, "normals_fixed"}; None without admesh."""
     import re
     import shutil
     import subprocess
@@ -740,7 +748,7 @@ def admesh_repairs(V, F) -> dict | None:
     if exe is None:
         return None
     T = np.asarray(V, dtype=np.float64)[np.asarray(F)].astype(np.float32)
-    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])  # from the float32 corners, as Blender's STL writer
     n /= np.maximum(np.linalg.norm(n, axis=1), 1e-30)[:, None]
     rec = np.zeros(len(T), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
     rec["n"], rec["v"] = n, T
@@ -754,7 +762,9 @@ def admesh_repairs(V, F) -> dict | None:
         m = re.search(re.escape(label) + r"\s*:\s*(\d+)", text)
         return int(m.group(1)) if m else -1
 
-    return {"parts": count("Number of parts"), "repairs": sum(count(k) for k in ADMESH_COUNTS)}
+    counts = {k: count(k) for k in ADMESH_COUNTS}
+    return {"parts": count("Number of parts"), "repairs": sum(counts.values()),
+            "counts": {k: v for k, v in counts.items() if v}, "normals_fixed": count("Normals fixed")}
 
 
 # ----------------------------------------------------------------------------- output
@@ -887,7 +897,9 @@ def admesh_text(p: dict) -> str:
     checks = [a for a in p.get("admesh", []) if a is not None]
     if not checks:
         return "n/a"
-    return f"{sum(a['parts'] == 1 and a['repairs'] == 0 for a in checks)}/{len(checks)}"
+    normals = sum(a.get("normals_fixed", 0) for a in checks)
+    return (f"{sum(a['parts'] == 1 and a['repairs'] == 0 for a in checks)}/{len(checks)}"
+            + (f" ({normals} stored normals recomputed)" if normals else ""))
 
 
 def target_lines(rows: list[dict]) -> list[str]:
