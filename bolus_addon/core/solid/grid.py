@@ -229,6 +229,7 @@ def _solid_on_grid(skin, grid, t, c, progress, stats, mesher: str = "cubes"):
     stats["level_set_s"] = stats.get("level_set_s", 0.0) + time.process_time() - T1
     if mesher == "cubes":
         M = to_manifold(V, F, "the marched solid")
+        del V, F, cubes  # before the merge below copies the solid: the peak of the whole shell
     # the triangles the mesher leaves in one plane (a face of the skin and its offset: most of a
     # coarse skin's solid) merged before anything else reads them
     M = M.simplify(COPLANAR_TOL_MM)

@@ -56,10 +56,10 @@ MIN_VOXELS_ACROSS = 4
 #: request is refused: about 11 bytes each at the peak (values, flags, masks)
 MAX_GRID_POINTS = 120_000_000
 #: marching cubes stores the field in bricks along the surface, so its memory follows the skin's
-#: area in voxel faces (area / res^2), not the box: measured peak about 3.1 kB per face (the chest
-#: wall, 1,284 cm2 at 0.5 mm: 514k faces, 1.6 GB); 650k keeps a 400 x 400 mm region at 0.5 mm
-#: within 2 GB
-MAX_SKIN_CELLS = 650_000
+#: area in voxel faces (area / res^2), not the box: measured peak about 3.25 kB per face (the chest
+#: wall, 1,284 cm2 at 0.5 mm: 514k faces, 1.67 GB, at the merge of the marched solid's coplanar
+#: triangles); 600k keeps the peak within 2 GB (a flat 390 x 390 mm region at 0.5 mm)
+MAX_SKIN_CELLS = 600_000
 
 
 @dataclass
