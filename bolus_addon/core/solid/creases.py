@@ -6,9 +6,9 @@ field's terms (inner face, outer face, rim wall: `distance_field.SkinDistance.te
 meet at an angle it cuts the crease off by up to half a voxel.  After Kobbelt et al.'s Extended
 Marching Cubes (2001), done on the mesh rather than in the cells:
 
-1. each vertex is labelled by its smallest term and moved onto that term's zero surface; a
-   vertex that lands outside another term's surface is moved onto the crease of the two by
-   alternating projections;
+1. each vertex is labelled by its smallest term; one near the outer and end loops that would
+   land outside a second face when moved onto its own is moved onto the crease of the two by
+   alternating projections (the others stay as marched);
 2. every edge whose ends lie on different faces gets a midpoint moved onto their crease the same
    way (the edge is left whole where that fails to converge, moves the point more than a voxel,
    or turns a new triangle over);
@@ -184,6 +184,7 @@ def sharpen_creases(skin, V, F, t, c, cap, res):
     if turned.any():  # a vertex whose move turned a face over goes back where it was
         back = np.unique(F[turned])
         V[back] = V0[back]
+        mask[back] = 1 << lab[back]
     E, X, ok = _crease_midpoints(faces, V, F, lab, mask, res)
     # only the faces with a vertex on a mixed edge can change
     touched = np.zeros(len(V), dtype=bool)
