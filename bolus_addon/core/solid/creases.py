@@ -61,6 +61,11 @@ class _Faces:
         return X, vals
 
 
+def _edge_key(a, b, n) -> np.ndarray:
+    """(k,) int64 key of the undirected edges (a, b) (k,) among n vertices."""
+    return np.minimum(a, b).astype(np.int64) * np.int64(n) + np.maximum(a, b)
+
+
 def _labels(vals, tol):
     """Bit masks (k,) int: bit j set where term j is the smallest or within tol of 0."""
     lab = np.argmin(vals, axis=1)
@@ -107,10 +112,10 @@ def _vertices_on_faces(faces, V, res):
 def _crease_midpoints(faces, V, F, lab, mask, res):
     """Step 2: the mixed edges (e,2) (ends with no face in common), their crease points (e,3),
     and which were accepted (e,)."""
-    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     E = E[(mask[E[:, 0]] & mask[E[:, 1]]) == 0]  # each mixed edge twice, once from each face
     n = np.int64(len(V))
-    key = np.unique(E[:, 0].astype(np.int64) * n + E[:, 1])
+    key = np.unique(_edge_key(E[:, 0], E[:, 1], n))
     E = np.stack([key // n, key % n], axis=1)
     if len(E) == 0:
         return E, np.zeros((0, 3)), np.zeros(0, dtype=bool)
@@ -128,13 +133,13 @@ def _split(V, F, E, X, ok):
     """Step 3: faces split at the accepted crease points X of edges E: (V', F', parent (m',))."""
     n = len(V)
     E, X = E[ok], X[ok]
-    key = E[:, 0].astype(np.int64) * n + E[:, 1]
+    key = _edge_key(E[:, 0], E[:, 1], n)
     order = np.argsort(key)
     key, mid = key[order], n + order
     V2 = np.concatenate([V, X])
 
     def midpoint(a, b):
-        k = np.minimum(a, b).astype(np.int64) * n + np.maximum(a, b)
+        k = _edge_key(a, b, n)
         pos = np.clip(np.searchsorted(key, k), 0, max(len(key) - 1, 0))
         hit = (key[pos] == k) if len(key) else np.zeros(len(k), dtype=bool)
         return np.where(hit, mid[pos] if len(key) else -1, -1)
@@ -191,7 +196,7 @@ def sharpen_creases(skin, V, F, t, c, cap, res):
     touched[E.ravel()] = True
     A = touched[F].any(axis=1)
     FA = F[A]
-    n = np.int64(len(V))
+    keys = _edge_key(E[:, 0], E[:, 1], len(V))
     for _ in range(20):  # each round leaves more edges whole: it ends
         V2, F2, parent = _split(V, FA, E, X, ok)
         bad = _turned(V, FA, V2, F2, parent)
@@ -199,8 +204,8 @@ def sharpen_creases(skin, V, F, t, c, cap, res):
             break
         # the edges of the parents of turned triangles stay whole
         Fb = FA[np.unique(parent[bad])]
-        Eb = np.sort(np.concatenate([Fb[:, [0, 1]], Fb[:, [1, 2]], Fb[:, [2, 0]]]), axis=1)
-        ok &= ~np.isin(E[:, 0].astype(np.int64) * n + E[:, 1], Eb[:, 0].astype(np.int64) * n + Eb[:, 1])
+        Eb = np.concatenate([Fb[:, [0, 1]], Fb[:, [1, 2]], Fb[:, [2, 0]]])
+        ok &= ~np.isin(keys, _edge_key(Eb[:, 0], Eb[:, 1], len(V)))
     else:
         ok[:] = False
         V2, F2, parent = _split(V, FA, E, X, ok)

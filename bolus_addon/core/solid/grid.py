@@ -18,11 +18,10 @@ import manifold3d as m3
 from ..errors import BolusError
 from .creases import sharpen_creases
 from .manifold import from_manifold, to_manifold
-from .shell_checks import COPLANAR_TOL_MM
 from .marching import marching_cubes_on
 from .narrow_band import field_narrow_band
 
-__all__ = ["_Grid", "_coarse_terms", "_field_coarse_to_fine", "_level_set_fast", "_tight_box",
+__all__ = ["COPLANAR_TOL_MM", "_Grid", "_coarse_terms", "_field_coarse_to_fine", "_level_set_fast", "_tight_box",
            "_solid_on_grid", "_progress"]
 
 
@@ -177,6 +176,10 @@ def _tight_box(skin, t, res):
     P = np.concatenate([skin.V, skin.V + t * skin.vn] + [skin.V[skin.F[:, j]] + t * skin.fn for j in range(3)])
     return P.min(axis=0) - 3 * res, P.max(axis=0) + 3 * res
 
+
+#: mm: `Manifold.simplify` merges the mesher's triangles that are coplanar (and edges collinear)
+#: to this; a micrometre also merged triangles across the skin's folds (docs/design/solid.md)
+COPLANAR_TOL_MM = 1e-7
 
 MESHERS = ("cubes", "level_set")  #: libigl's marching cubes on one lattice; manifold3d's level set on two
 

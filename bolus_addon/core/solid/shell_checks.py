@@ -222,8 +222,6 @@ def _drop_crumbs(M):
 
 #: mm: edges shorter than this are collapsed first (`manifold.weld_short_edges`)
 SLIVER_TOL_MM = 1e-3
-#: mm: `Manifold.simplify` merges triangles that are coplanar (and edges collinear) to this
-COPLANAR_TOL_MM = 1e-7
 
 
 def _clean(M):

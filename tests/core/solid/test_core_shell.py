@@ -615,7 +615,8 @@ def test_clean_collapses_short_edges_and_the_mesher_merges_coplanar_fans():
     other); the mesher's coplanar merge (COPLANAR_TOL_MM) takes a fan that lies in its plane and
     keeps the hair-off one; the volume stays."""
     from bolus_addon.core.solid.manifold import from_manifold, to_manifold
-    from bolus_addon.core.solid.shell_checks import COPLANAR_TOL_MM, SLIVER_TOL_MM, _clean
+    from bolus_addon.core.solid.grid import COPLANAR_TOL_MM
+    from bolus_addon.core.solid.shell_checks import SLIVER_TOL_MM, _clean
 
     cases = {"flat": ([5.0, 5.0, 10.0], 9, 8), "sliver": ([SLIVER_TOL_MM / 10, 0.0, 10.0], 8, 8),
              "tent": ([5.0, 5.0, 10.0 + SLIVER_TOL_MM / 10], 9, 9)}
