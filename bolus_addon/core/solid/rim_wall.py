@@ -31,6 +31,11 @@ SMOOTH_MM = 2.0
 STRIP_STEP_MM = 1.0
 
 
+def _rows(below: float, above: float) -> np.ndarray:
+    """Heights (J+1,) mm of the strip's rows along the rulings, at most STRIP_STEP_MM apart."""
+    return np.linspace(-below, above, max(1, int(np.ceil((below + above) / STRIP_STEP_MM))) + 1)
+
+
 def _loop_arc(P: np.ndarray) -> tuple[np.ndarray, float]:
     """Arc length (k,) mm at each vertex of the closed polyline P (k,3) and its length."""
     seg = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
@@ -93,7 +98,7 @@ def unfolded_rulings(P, N, below: float, above: float, rounds: int = 400) -> np.
 def _folded_columns(P, N, below, above) -> np.ndarray:
     """Indices i of the columns (P_i, P_{i+1}) of the strip whose quads' normals (at the strip's
     rows) turn more than 90 degrees from the quad at the bottom: the strip folds there."""
-    rows = np.linspace(-below, above, max(2, int(np.ceil((below + above) / STRIP_STEP_MM))) + 1)
+    rows = _rows(below, above)
     a = P[None] + rows[:, None, None] * N[None]           # (J+1, k, 3)
     b = np.roll(a, -1, axis=1)
     n = np.cross(b[1:] - a[:-1], a[1:] - b[:-1])          # quad normals by their diagonals
@@ -140,8 +145,8 @@ class RimWall:
         """Rows of the loop P (k,3) moved by h N, h from -below to +above: (V (k*(J+1),3),
         F (2kJ,3)), quads (i, j), (i+1, j), (i+1, j+1), (i, j+1) split on one diagonal."""
         k = len(P)
-        J = max(1, int(np.ceil((below + above) / STRIP_STEP_MM)))
-        h = np.linspace(-below, above, J + 1)
+        h = _rows(below, above)
+        J = len(h) - 1
         V = (P[None, :, :] + h[:, None, None] * N[None, :, :]).reshape(-1, 3)
         i = np.arange(k)
         i1 = (i + 1) % k
