@@ -739,24 +739,17 @@ def admesh_repairs(V, F) -> dict | None:
     `ADMESH_COUNTS`, "counts": the ones not 0, "normals_fixed"}; None without admesh."""
     import re
     import shutil
-    import subprocess
-    import tempfile
 
     import numpy as np
+    from meshfiles import write_binary  # tests/ is on the path (benchutil)
 
     exe = shutil.which("admesh")
     if exe is None:
         return None
-    T = np.asarray(V, dtype=np.float64)[np.asarray(F)].astype(np.float32)
-    n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])  # from the float32 corners, as Blender's STL writer
-    n /= np.maximum(np.linalg.norm(n, axis=1), 1e-30)[:, None]
-    rec = np.zeros(len(T), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
-    rec["n"], rec["v"] = n, T
     with tempfile.TemporaryDirectory() as d:
-        path = f"{d}/part.stl"
-        with open(path, "wb") as f:
-            f.write(b"\0" * 80 + np.uint32(len(T)).tobytes() + rec.tobytes())
-        text = subprocess.run([exe, path], capture_output=True, text=True, timeout=600).stdout
+        path = Path(d) / "part.stl"
+        write_binary(path, np.asarray(V, dtype=np.float64), np.asarray(F), header=b"part", normals=True)
+        text = subprocess.run([exe, str(path)], capture_output=True, text=True, timeout=600).stdout
 
     def count(label):
         m = re.search(re.escape(label) + r"\s*:\s*(\d+)", text)

@@ -2,9 +2,15 @@
 import numpy as np
 
 
-def write_binary(path, V, F, header=b"binary test"):
+def write_binary(path, V, F, header=b"binary test", normals=False):
+    """A binary STL of V[F]; normals: each facet's unit normal from its float32 corners (as
+    Blender's STL writer stores it), else zeros."""
     rec = np.zeros(len(F), dtype=[("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")])
     rec["v"] = V[F]
+    if normals:
+        T = rec["v"]
+        n = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+        rec["n"] = n / np.maximum(np.linalg.norm(n, axis=1), 1e-30)[:, None]
     path.write_bytes(header.ljust(80, b" ") + np.uint32(len(F)).tobytes() + rec.tobytes())
 
 
