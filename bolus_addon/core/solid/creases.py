@@ -21,10 +21,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..mesh.crossings import crossing_pairs
+
 __all__ = ["sharpen_creases", "CREASE_ROUNDS"]
 
 #: alternating projections between two faces to reach their crease
 CREASE_ROUNDS = 4
+#: rounds of undoing the moves that make triangles cross (then every move is undone)
+CROSS_ROUNDS = 6
+#: a vertex moved by more than this share of a voxel is checked for crossings (the projection of
+#: a vertex onto its own face moves it by far less; the moves onto a crease by up to a voxel)
+MOVED_FRACTION = 0.05
 
 
 class _Faces:
@@ -178,10 +185,31 @@ def _turned(V, F, V2, F2, parent):
     return np.einsum("ij,ij->i", n0, n1) <= 0
 
 
+def _split_unturned(V, FA, E, X, ok, keys, n):
+    """`_split` of the faces FA (k,3) at the crease midpoints X of the edges E marked ok, with
+    the edges of every parent whose child turned over left whole (ok updated in place)."""
+    for _ in range(20):  # each round leaves more edges whole: it ends
+        V2, F2, parent = _split(V, FA, E, X, ok)
+        bad = _turned(V, FA, V2, F2, parent)
+        if not bad.any():
+            return V2, F2, parent
+        # the edges of the parents of turned triangles stay whole
+        Fb = FA[np.unique(parent[bad])]
+        Eb = np.concatenate([Fb[:, [0, 1]], Fb[:, [1, 2]], Fb[:, [2, 0]]])
+        ok &= ~np.isin(keys, _edge_key(Eb[:, 0], Eb[:, 1], n))
+    ok[:] = False
+    return _split(V, FA, E, X, ok)
+
+
 def sharpen_creases(skin, V, F, t, c, cap, res):
     """The marched solid (V (n,3), F (m,3)) with its vertices on the field's faces and its
     creases sharp (module docstring).  skin: `SkinDistance`; t, c, cap: the field's thickness,
-    clearance and rim cap (mm); res: the voxel size (mm).  Returns (V', F', figures dict)."""
+    clearance and rim cap (mm); res: the voxel size (mm).  Returns (V', F', figures dict).
+
+    A move that makes two triangles cross (`crossing_pairs` in float32, as an STL file and
+    Blender's checks hold the positions; a vertex pulled onto a crease past a neighbour's face)
+    is undone: the vertices of both go back where marching cubes put them
+    and their edges stay whole, until no moved triangle crosses another."""
     faces = _Faces(skin, t, c, cap)
     V0 = V.copy()
     V, lab, mask = _vertices_on_faces(faces, np.array(V, dtype=np.float64), res)
@@ -197,20 +225,30 @@ def sharpen_creases(skin, V, F, t, c, cap, res):
     A = touched[F].any(axis=1)
     FA = F[A]
     keys = _edge_key(E[:, 0], E[:, 1], len(V))
-    for _ in range(20):  # each round leaves more edges whole: it ends
-        V2, F2, parent = _split(V, FA, E, X, ok)
-        bad = _turned(V, FA, V2, F2, parent)
-        if not bad.any():
+    undone = 0
+    for _ in range(CROSS_ROUNDS):
+        V2, F2, parent = _split_unturned(V, FA, E, X, ok, keys, len(V))
+        Fall = np.concatenate([F[~A], F2])
+        moved = np.linalg.norm(V - V0, axis=1) > MOVED_FRACTION * res
+        among = np.concatenate([np.nonzero(moved[F[~A]].any(axis=1))[0], np.sum(~A) + np.arange(len(F2))])
+        pairs = crossing_pairs(V2, Fall, among, float32=True)
+        if len(pairs) == 0:
             break
-        # the edges of the parents of turned triangles stay whole
-        Fb = FA[np.unique(parent[bad])]
+        tri = np.unique(pairs)
+        verts = np.unique(Fall[tri])
+        verts = verts[verts < len(V)]  # the split midpoints belong to the edges below
+        undone += len(tri)
+        V[verts] = V0[verts]
+        kids = tri[tri >= np.sum(~A)] - np.sum(~A)
+        Fb = np.concatenate([FA[np.unique(parent[kids])], F[np.isin(F, verts).any(axis=1)]])
         Eb = np.concatenate([Fb[:, [0, 1]], Fb[:, [1, 2]], Fb[:, [2, 0]]])
         ok &= ~np.isin(keys, _edge_key(Eb[:, 0], Eb[:, 1], len(V)))
     else:
         ok[:] = False
+        V = V0.copy()
         V2, F2, parent = _split(V, FA, E, X, ok)
-    F2 = np.concatenate([F[~A], F2])
+        Fall = np.concatenate([F[~A], F2])
     figures = {"crease_vertices": int(((mask & (mask - 1)) != 0).sum()),
                "crease_edges_split": int(ok.sum()), "crease_edges_whole": int((~ok).sum()),
-               "faces_turned_back": int(turned.sum())}
-    return V2, F2, figures
+               "faces_turned_back": int(turned.sum()), "crossing_triangles_undone": undone}
+    return V2, Fall, figures

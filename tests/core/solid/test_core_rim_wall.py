@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bolus_addon.core.mesh.crossings import crossing_pairs
 from bolus_addon.core.solid.distance_field import SkinDistance
 from bolus_addon.core.solid.manifold import SIDE_RIM, closed_report
 from bolus_addon.core.solid.rim_wall import _folded_columns, smoothed_border_normals, unfolded_rulings
@@ -80,6 +81,8 @@ def test_strip_rim_shell_is_closed_and_smoother_than_the_faces_rim():
         rep = closed_report(S.V, S.F)
         assert rep["closed"], (rim, rep)
         assert S.warnings == [], (rim, S.warnings)
+        # no triangle of the wall crosses another, with the positions as an STL file holds them
+        assert len(crossing_pairs(S.V, S.F, np.nonzero(S.side == SIDE_RIM)[0], float32=True)) == 0, rim
         res = sb.rim_residuals(S.V, S.F, S.side == SIDE_RIM)
         assert len(res) > 5000
         p95[rim] = float(np.percentile(res, 95))
