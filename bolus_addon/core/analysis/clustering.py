@@ -31,6 +31,10 @@ __all__ = ["METHODS", "REG_COVAR", "KMEANS_RESTARTS", "GMM_RESTARTS", "WEIGHTED_
 METHODS = ("kmeans", "gmm")
 REG_COVAR = 1e-6  #: covariance floor of the Gaussian mixture, relative to the unit-RMS embedding (module doc)
 KMEANS_RESTARTS = 4  #: k-means++ restarts: the best of 4 was stable on every test mesh
+#: above this many rows k-means++ and its restarts run on this many rows drawn at random, and
+#: Lloyd's iterations from the best centres then run on every row (nefertiti, 35k vertices:
+#: 0.36 s -> 0.06 s, the same patches on 99.9 % of the triangles, as a second seed gives)
+KMEANS_SAMPLE = 12_000
 GMM_RESTARTS = 3  #: mixture restarts: the best likelihood of 3 was stable on every test mesh
 WEIGHTED_DRAWS = (4096, 50_000)  #: area-weighted resample for the mixture: max(rows, 4096), at most 50,000
 
@@ -49,7 +53,8 @@ def standardise_rows(U) -> np.ndarray:
 def cluster_rows(U, k: int, method: str = "kmeans", rng=None, weights=None) -> np.ndarray:
     """Cluster the rows of a spectral embedding U (n,d) into k labels (n,) int64.
 
-    method "kmeans" (scikit-learn KMeans, k-means++ seeding, ``KMEANS_RESTARTS``) or
+    method "kmeans" (scikit-learn KMeans, k-means++ seeding, ``KMEANS_RESTARTS``; on more
+    than ``KMEANS_SAMPLE`` unweighted rows seeded on a random sample of them) or
     "gmm" (GaussianMixture, full covariances, ``GMM_RESTARTS``, ``REG_COVAR``).
     weights (n,) >= 0, optional: how much each row counts (face areas for ABcut):
     k-means takes them as sample weights, the mixture is fitted on rows drawn with
@@ -78,8 +83,14 @@ def cluster_rows(U, k: int, method: str = "kmeans", rng=None, weights=None) -> n
     rng = as_rng(rng)
     if method == "kmeans":
         seed = int(rng.integers(0, 2**31 - 1))
-        km = KMeans(n_clusters=k, n_init=KMEANS_RESTARTS, random_state=seed)
-        return km.fit_predict(X, sample_weight=None if w is None else w * n).astype(np.int64)
+        sw = None if w is None else w * n
+        if n > KMEANS_SAMPLE and w is None:
+            pick = np.random.default_rng(seed).choice(n, KMEANS_SAMPLE, replace=False)
+            centres = KMeans(n_clusters=k, n_init=KMEANS_RESTARTS, random_state=seed).fit(X[pick]).cluster_centers_
+            km = KMeans(n_clusters=k, init=centres, n_init=1, random_state=seed)
+        else:
+            km = KMeans(n_clusters=k, n_init=KMEANS_RESTARTS, random_state=seed)
+        return km.fit_predict(X, sample_weight=sw).astype(np.int64)
     fit_rows = X
     if w is not None:
         draws = int(min(max(n, WEIGHTED_DRAWS[0]), WEIGHTED_DRAWS[1]))

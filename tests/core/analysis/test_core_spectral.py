@@ -192,6 +192,28 @@ def test_cluster_rows_finds_blobs_at_any_scale(method):
     assert np.sqrt((clustering.standardise_rows(X) ** 2).mean()) == pytest.approx(1.0)
 
 
+def test_kmeans_on_many_rows_is_seeded_on_a_sample_and_fits_every_row():
+    """Above KMEANS_SAMPLE rows the restarts run on a sample and Lloyd's iterations on all rows:
+    the same partition as the truth, and the same labels as k-means seeded on every row."""
+    rng = np.random.default_rng(3)
+    centres = np.array([[0.0, 0.0], [3.0, 0.5], [1.0, 2.5], [2.5, 3.0]])
+    lab = rng.integers(0, 4, clustering.KMEANS_SAMPLE + 8000)
+    X = centres[lab] + 0.3 * rng.standard_normal((len(lab), 2))
+    out = cluster_rows(X, 4, rng=0)
+    per_blob = [np.bincount(out[lab == b], minlength=4).max() / np.sum(lab == b) for b in range(4)]
+    assert min(per_blob) > 0.97
+    saved = clustering.KMEANS_SAMPLE
+    clustering.KMEANS_SAMPLE = 10**9
+    try:
+        full = cluster_rows(X, 4, rng=0)
+    finally:
+        clustering.KMEANS_SAMPLE = saved
+    # one partition up to the names of the clusters
+    M = np.zeros((4, 4), dtype=int)
+    np.add.at(M, (out, full), 1)
+    assert M.max(axis=1).sum() / len(X) > 0.999
+
+
 def test_cluster_rows_weights_and_bad_input():
     X, lab = _blobs(1)
     # weights: the mixture is fitted on rows drawn by weight; zero weight on a blob still labels its rows
