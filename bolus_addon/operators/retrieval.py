@@ -206,6 +206,7 @@ class BOLUS_OT_retrieve(BolusOperator, bpy.types.Operator):
 
     def finish(self, context, job, result):
         photo, ranking, warnings, redone = result
+        warnings = list(warnings) + (photo.warnings() if hasattr(photo, "warnings") else [])
         conf = retrieval.confidence(ranking)
         tie = len(ranking) > 1 and conf < AMBIGUOUS
         if tie:

@@ -6,7 +6,7 @@
    intensity range under MIN_RANGE); photos longer than WORK_SIDE are block-averaged down first;
 2. background: a colour plane a + b x + c y per channel fitted to the frame of the photo (2 % wide),
    refitted once without the frame pixels more than 3 robust deviations off (an object that touches
-   the border); D = the largest channel difference from that plane, after a 1 px blur;
+   the border); D = the largest channel difference from that plane, after a BLUR px blur;
 3. threshold: Otsu's threshold t of D gives the seeds (D > t), grown (hysteresis) through the pixels
    with D > max(LOW * t, noise floor), the floor 4 robust deviations of D on the frame: the shaded
    side of an object close to the background joins the lit side it touches;
@@ -14,8 +14,10 @@
    `image_contour.contour_pixels`); the object cluster's edge pixels within CLOSE of the grown region
    are added (they close an outline where the colour difference alone fades);
 5. closing by CLOSE (1.5 % of the diagonal), hole filling (but for holes of at least HOLE_MIN of the
-   region that look like the background: a ring's opening), the largest 8-connected blob;
-6. refusals: a blob under MIN_AREA of the photo (no object) or over MAX_AREA (no background left).
+   region that look like the background: a ring's opening), the largest 8-connected blob, its 2-px
+   outer band trimmed to where D is half its local step (the low threshold grows a pixel too far);
+6. refusals: a blob under MIN_AREA of the photo (no object) or over MAX_AREA (no background left);
+   ``cut``: the share of its outline on the photo's edge (the object partly out of the frame).
 
 Design notes: docs/design/retrieval.md.
 """
@@ -38,6 +40,7 @@ MIN_RANGE = 0.03  #: intensity range (0..1) under which a photo counts as unifor
 FRAME = 0.02  #: width of the background frame, share of the shorter side (>= 2 px)
 LOW = 0.35  #: the growing threshold, share of Otsu's
 FLOOR_MADS = 4.0  #: the noise floor, robust deviations of D on the frame
+BLUR = 0.6  #: px, the gaussian blur of the photo before D (noise; wider blurs grow a halo round the object)
 CLOSE = 0.015  #: closing radius, share of the diagonal (>= 2 px)
 MIN_AREA, MAX_AREA = 0.002, 0.97  #: the blob's share of the photo
 HOLE_MIN = 0.01  #: holes at least this share of the region that look like the background stay open
@@ -46,13 +49,13 @@ HOLE_MIN = 0.01  #: holes at least this share of the region that look like the b
 @dataclass
 class Silhouette:
     """mask (H,W) bool the object at the working size; scale: working px per photo px; threshold: Otsu's t;
-    contour_points: the seed front end's contour pixels (0 when it found none); note: what it said."""
+    contour_points: the seed front end's contour pixels (0 when it found none)."""
 
     mask: np.ndarray
     scale: float
     threshold: float
     contour_points: int
-    note: str = ""
+    cut: float = 0.0  #: share of the outline on the photo's edge (the object partly out of the frame)
 
 
 def otsu(values: np.ndarray, bins: int = 256) -> float:
@@ -98,7 +101,7 @@ def background_distance(img: np.ndarray) -> tuple[np.ndarray, float]:
         use = res <= np.median(res[use]) + 3.0 * mad
     yy, xx = np.mgrid[0:H, 0:W]
     plane = coef[0] + coef[1] * (xx / W)[..., None] + coef[2] * (yy / H)[..., None]
-    smooth = ndimage.gaussian_filter(img, (1.0, 1.0, 0.0))
+    smooth = ndimage.gaussian_filter(img, (BLUR, BLUR, 0.0))
     D = np.abs(smooth - plane).max(axis=2)
     d = D[frame][use]
     floor = float(np.median(d)) + FLOOR_MADS * 1.4826 * float(np.median(np.abs(d - np.median(d)))) + 0.01
@@ -137,6 +140,13 @@ def _fill_holes(region: np.ndarray, D: np.ndarray, low: float) -> np.ndarray:
     return filled & ~np.isin(lab, keep)
 
 
+def _trim(mask: np.ndarray, D: np.ndarray) -> np.ndarray:
+    """mask without the pixels of its 2-px outer band whose D is under half of the largest D within 2 px: the
+    outline put where the blurred step is half way (the low threshold grows one pixel too far)."""
+    band = mask & ~ndimage.binary_erosion(mask, iterations=2)
+    return mask & ~(band & (D < 0.5 * ndimage.maximum_filter(D, size=5)))
+
+
 def photo_silhouette(rgb, rng=0, use_front_end: bool = True) -> Silhouette:
     """The object's silhouette in a photo (module doc, steps 1-6); BolusError when there is none."""
     img = as_image(rgb, "photo")
@@ -168,11 +178,13 @@ def photo_silhouette(rgb, rng=0, use_front_end: bool = True) -> Silhouette:
     if count == 0:
         raise BolusError("no object found in the photo")
     sizes = np.bincount(lab.ravel())[1:]
-    mask = lab == 1 + int(np.argmax(sizes))
+    mask = _trim(lab == 1 + int(np.argmax(sizes)), D)
     share = float(mask.mean())
     if share < MIN_AREA or mask.sum() < 64:
         raise BolusError(f"no object found in the photo: the largest region that differs from the background covers "
                          f"{100 * share:.2f} % of it")
     if share > MAX_AREA:
         raise BolusError(f"the object fills {100 * share:.0f} % of the photo: leave some background round it")
-    return Silhouette(mask, scale, t, npts)
+    outline = mask & ~ndimage.binary_erosion(mask)
+    edge = int(outline[0].sum() + outline[-1].sum() + outline[1:-1, 0].sum() + outline[1:-1, -1].sum())
+    return Silhouette(mask, scale, t, npts, edge / max(1, int(outline.sum())))

@@ -32,6 +32,7 @@ NAME = "VIEWS"
 DIRECTIONS = 40  #: view directions on the half sphere (as 80 on the whole sphere: mirrors are alike)
 RENDER_PX = 128  #: silhouette side in pixels
 PAIRS = 4000  #: random view pairs that set the group weights
+CUT_WARN = 0.03  #: a photo whose outline lies on the frame's edge for more than this share is warned
 SETTINGS = {"method": "views: silhouettes, Zernike + Fourier, L1 best view", "directions": DIRECTIONS,
             "render_px": RENDER_PX, "grid": sd.GRID, "order": sd.ORDER, "bins": sd.BINS, "harmonics": sd.HARMONICS}
 
@@ -45,6 +46,14 @@ class ViewsDescriptor:
     size: int  #: vertices of the model, or silhouette pixels of the photo
     seconds: float = 0.0
     mask: np.ndarray | None = field(default=None, repr=False)  #: a photo's silhouette (not cached)
+    cut: float = 0.0  #: a photo's share of the outline on the frame's edge
+
+    def warnings(self) -> list[str]:
+        """What the user should know about a photo's descriptor (the object cut by the frame)."""
+        if self.cut > CUT_WARN:
+            return [f"the object touches the photo's edge ({100 * self.cut:.0f} % of its outline): a silhouette "
+                    "cut by the frame can match the wrong model; take the photo with all of the object in the frame"]
+        return []
 
     def arrays(self) -> dict:
         return {"views": np.asarray(self.matrix, np.float32)}
@@ -73,7 +82,8 @@ def photo_descriptor(rgb, rng=0) -> ViewsDescriptor:
     """The descriptor (1, D) of the photo's silhouette (`photo_silhouette`); BolusError when there is none."""
     t = time.perf_counter()
     sil = photo_silhouette(rgb, rng=rng)
-    return ViewsDescriptor(sd.describe(sil.mask), "photo", int(sil.mask.sum()), time.perf_counter() - t, sil.mask)
+    return ViewsDescriptor(sd.describe(sil.mask), "photo", int(sil.mask.sum()), time.perf_counter() - t, sil.mask,
+                           sil.cut)
 
 
 def group_weights(M: np.ndarray, rng=0) -> np.ndarray:
