@@ -4,9 +4,10 @@
 
 1. checks: at least MIN_SIDE (64) pixels each way, not uniform (all white, all black or blank:
    intensity range under MIN_RANGE); photos longer than WORK_SIDE are block-averaged down first;
-2. background: a colour plane a + b x + c y per channel fitted to the frame of the photo (2 % wide),
-   refitted once without the frame pixels more than 3 robust deviations off (an object that touches
-   the border); D = the largest channel difference from that plane, after a BLUR px blur;
+2. background: a quadratic colour surface per channel (a gradient and a vignette) fitted to the frame of
+   the photo (2 % wide): first the frame pixels near its median colour, then refitted twice without
+   those more than 3 robust deviations off (an object that touches the border); D = the largest
+   channel difference from that surface, after a BLUR px blur;
 3. threshold: Otsu's threshold t of D gives the seeds (D > t), grown (hysteresis) through the pixels
    with D > max(LOW * t, noise floor), the floor 4 robust deviations of D on the frame: the shaded
    side of an object close to the background joins the lit side it touches;
@@ -14,8 +15,8 @@
    `image_contour.contour_pixels`); the object cluster's edge pixels within CLOSE of the grown region
    are added (they close an outline where the colour difference alone fades);
 5. closing by CLOSE (1.5 % of the diagonal), hole filling (but for holes of at least HOLE_MIN of the
-   region that look like the background: a ring's opening), the largest 8-connected blob, its 2-px
-   outer band trimmed to where D is half its local step (the low threshold grows a pixel too far);
+   region that look like the background: a ring's opening), the largest 8-connected blob, its
+   outermost pixel layer trimmed to where D is half its local step (the low threshold grows a pixel too far);
 6. refusals: a blob under MIN_AREA of the photo (no object) or over MAX_AREA (no background left);
    ``cut``: the share of its outline on the photo's edge (the object partly out of the frame).
 
@@ -38,7 +39,7 @@ MIN_SIDE = 64  #: px: smaller photos are refused
 WORK_SIDE = 480  #: px: longer photos are block-averaged down to at most this (the descriptors need no more)
 MIN_RANGE = 0.03  #: intensity range (0..1) under which a photo counts as uniform
 FRAME = 0.02  #: width of the background frame, share of the shorter side (>= 2 px)
-LOW = 0.35  #: the growing threshold, share of Otsu's
+LOW = 0.15  #: the growing threshold, share of Otsu's
 FLOOR_MADS = 4.0  #: the noise floor, robust deviations of D on the frame
 BLUR = 0.6  #: px, the gaussian blur of the photo before D (noise; wider blurs grow a halo round the object)
 CLOSE = 0.015  #: closing radius, share of the diagonal (>= 2 px)
@@ -85,22 +86,26 @@ def _shrink(img: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 def background_distance(img: np.ndarray) -> tuple[np.ndarray, float]:
-    """(D (H,W): the largest channel difference from the background plane, the noise floor) of img (H,W,3)."""
+    """(D (H,W): the largest channel difference from the background surface, the noise floor) of img (H,W,3)."""
     H, W = img.shape[:2]
     b = max(2, int(round(FRAME * min(H, W))))
     frame = np.zeros((H, W), dtype=bool)
     frame[:b], frame[-b:], frame[:, :b], frame[:, -b:] = True, True, True, True
     ys, xs = np.nonzero(frame)
-    A = np.column_stack([np.ones(len(xs)), xs / W, ys / H])
+    def terms(x, y):  # a quadratic surface: a gradient and a vignette
+        return [np.ones_like(x), x, y, x * x, y * y, x * y]
+
+    A = np.column_stack(terms(xs / W - 0.5, ys / H - 0.5))
     C = img[ys, xs]
-    use = np.ones(len(xs), dtype=bool)
-    for _ in range(2):
+    res = np.abs(C - np.median(C, axis=0)).max(axis=1)  # first: the frame's typical colour (an object in
+    use = np.ones(len(xs), dtype=bool)                 # less than half of the frame does not move it)
+    for _ in range(3):
+        mad = 1.4826 * float(np.median(np.abs(res[use] - np.median(res[use])))) + 1e-3
+        use = res <= np.median(res[use]) + 3.0 * mad + 0.01
         coef, *_ = np.linalg.lstsq(A[use], C[use], rcond=None)
         res = np.abs(C - A @ coef).max(axis=1)
-        mad = 1.4826 * float(np.median(np.abs(res[use] - np.median(res[use])))) + 1e-3
-        use = res <= np.median(res[use]) + 3.0 * mad
     yy, xx = np.mgrid[0:H, 0:W]
-    plane = coef[0] + coef[1] * (xx / W)[..., None] + coef[2] * (yy / H)[..., None]
+    plane = np.stack(terms(xx / W - 0.5, yy / H - 0.5), axis=-1) @ coef
     smooth = ndimage.gaussian_filter(img, (BLUR, BLUR, 0.0))
     D = np.abs(smooth - plane).max(axis=2)
     d = D[frame][use]
@@ -141,10 +146,11 @@ def _fill_holes(region: np.ndarray, D: np.ndarray, low: float) -> np.ndarray:
 
 
 def _trim(mask: np.ndarray, D: np.ndarray) -> np.ndarray:
-    """mask without the pixels of its 2-px outer band whose D is under half of the largest D within 2 px: the
-    outline put where the blurred step is half way (the low threshold grows one pixel too far)."""
-    band = mask & ~ndimage.binary_erosion(mask, iterations=2)
-    return mask & ~(band & (D < 0.5 * ndimage.maximum_filter(D, size=5)))
+    """mask without the pixels of its outermost layer whose D is under half of the largest D of their 3 x 3
+    neighbourhood: the outline put where the blurred step is half way (the low threshold grows one pixel too
+    far; a dim side several pixels wide loses one pixel at most)."""
+    band = mask & ~ndimage.binary_erosion(mask)
+    return mask & ~(band & (D < 0.5 * ndimage.maximum_filter(D, size=3)))
 
 
 def photo_silhouette(rgb, rng=0, use_front_end: bool = True) -> Silhouette:
