@@ -111,7 +111,7 @@ def render_views(V, F, directions, size: int = 128, depth: bool = False):
     camera) -> (k, size, size) bool, and the z-buffers (k, size, size) float (or None without ``depth``).
 
     Each view's projection is centred and scaled to fill size - 2 MARGIN_PX pixels across its longer
-    side.  BolusError on a mesh without faces or with a flat (zero-extent) projection in every view."""
+    side.  BolusError on a mesh without faces, whose faces have no area, or with no view that shows one."""
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     if F.ndim != 2 or F.shape[1] != 3 or len(F) == 0:
@@ -120,6 +120,10 @@ def render_views(V, F, directions, size: int = 128, depth: bool = False):
         raise BolusError("the model has NaN or infinite vertex coordinates")
     D = np.atleast_2d(np.asarray(directions, dtype=np.float64))
     used = np.unique(F)
+    ext = float(np.ptp(V[used], axis=0).max())
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1).sum()
+    if not area > 1e-9 * ext * ext:
+        raise BolusError("the model's faces have no area (a point, a line or degenerate triangles only)")
     Vc = V - (V[used].min(axis=0) + V[used].max(axis=0)) / 2.0
     sils = np.zeros((len(D), size, size), dtype=bool)
     zb = np.full((len(D), size, size), np.inf) if depth else None

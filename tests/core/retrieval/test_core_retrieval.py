@@ -69,3 +69,75 @@ def test_refusals(tmp_path):
         skeleton_method.rank(d, {})
     with pytest.raises(BolusError, match="unknown retrieval method 'ICP'"):
         retrieval.plan_update(tmp_path, "ICP")
+
+
+def quiet(*_):
+    return None
+
+
+def test_views_and_skeleton_share_one_cache_and_keep_each_other(tmp_path):
+    write_obj(tmp_path / "torus.obj", *torus(50.0, 16.0, 32, 12))
+    V, F = icosphere(2, 30.0)
+    write_binary(tmp_path / "egg.stl", V * np.array([2.0, 1.0, 1.0]), F)
+    keep, new, _ = describe_all(tmp_path, "VIEWS")
+    assert len(new) == 2 and all(e.descriptor.matrix.shape[0] > 30 for e in new)
+    describe_all(tmp_path, "SKELETON")
+    views_cached = retrieval.load_cache(tmp_path, "VIEWS")  # still there after the skeleton's save
+    assert set(views_cached) == {"egg.stl", "torus.obj"}
+    for e in new:
+        np.testing.assert_array_equal(views_cached[e.file].descriptor.matrix, e.descriptor.matrix)
+    assert set(retrieval.load_cache(tmp_path, "SKELETON")) == {"egg.stl", "torus.obj"}
+    keep, todo, gone = retrieval.plan_update(tmp_path, "VIEWS")
+    assert (len(keep), todo, gone) == (2, [], [])
+
+
+def test_an_interrupted_build_resumes_and_a_failed_write_keeps_the_old_cache(tmp_path, monkeypatch):
+    for k in range(5):
+        write_obj(tmp_path / f"t{k}.obj", *torus(50.0, 10.0 + 2 * k, 24, 10))
+    monkeypatch.setattr(retrieval, "CHECKPOINT_S", 0.0)
+    calls = []
+
+    def stop_after_first_batch(fraction, text):
+        calls.append(text)
+        if len(calls) == 2:
+            raise KeyboardInterrupt  # Esc in the middle of the build
+
+    keep, todo, _ = retrieval.plan_update(tmp_path, "VIEWS")
+    with pytest.raises(KeyboardInterrupt):
+        retrieval.update_library(tmp_path, [(p, p) for p in todo], keep, stop_after_first_batch, 0, 1, "VIEWS")
+    done = retrieval.load_cache(tmp_path, "VIEWS")
+    assert 0 < len(done) < 5  # the first batch was saved ...
+    keep, todo, _ = retrieval.plan_update(tmp_path, "VIEWS")
+    assert len(keep) == len(done) and len(todo) == 5 - len(done)  # ... and only the rest is done again
+    retrieval.update_library(tmp_path, [(p, p) for p in todo], keep, quiet, 0, 1, "VIEWS")
+    before = (tmp_path / retrieval.CACHE_FILE).read_bytes()
+
+    def full_disk(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(np, "savez", full_disk)
+    with pytest.raises(BolusError, match="cannot write the library cache .* No space left"):
+        retrieval.save_cache(tmp_path, list(retrieval.load_cache(tmp_path, "VIEWS").values()), "VIEWS")
+    assert (tmp_path / retrieval.CACHE_FILE).read_bytes() == before and not list(tmp_path.glob("*.tmp"))
+
+
+def test_models_without_faces_or_broken_are_left_out(tmp_path):
+    write_obj(tmp_path / "torus.obj", *torus(50.0, 16.0, 32, 12))
+    (tmp_path / "points.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
+    (tmp_path / "flat.obj").write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
+    (tmp_path / "broken.stl").write_bytes(b"\x00\x01" * 40)
+    keep, todo, _ = retrieval.plan_update(tmp_path, "VIEWS")
+    entries, new, warnings = retrieval.update_library(tmp_path, [(p, p) for p in todo], keep, quiet, 0, 1, "VIEWS")
+    assert set(entries) == {"torus.obj"}
+    assert sorted(w.split(" ")[0] for w in warnings) == ["broken.stl", "flat.obj", "points.obj"]
+    assert all("left out of the library" in w for w in warnings)
+    (tmp_path / "torus.obj").unlink()
+    keep, todo, _ = retrieval.plan_update(tmp_path, "VIEWS")
+    with pytest.raises(BolusError, match="no model of the library .* could be described"):
+        retrieval.update_library(tmp_path, [(p, p) for p in todo], keep, quiet, 0, 1, "VIEWS")
+
+
+def test_confidence_is_the_runner_ups_relative_gap():
+    assert retrieval.confidence([("a", 0.5), ("b", 1.0)]) == pytest.approx(0.5)
+    assert retrieval.confidence([("a", 0.5), ("b", 0.5)]) == 0.0
+    assert retrieval.confidence([("a", 0.5)]) == 1.0

@@ -88,8 +88,10 @@ def test_silhouette_of_a_ball_is_a_disc_and_of_a_box_its_face():
 def test_render_refuses_a_model_without_faces_or_area():
     with pytest.raises(BolusError, match="no faces"):
         render_views(np.zeros((3, 3)), np.zeros((0, 3), int), [(0, 0, 1)])
-    with pytest.raises(BolusError, match="flat or a point"):
+    with pytest.raises(BolusError, match="faces have no area"):
         render_views(np.zeros((3, 3)), np.array([[0, 1, 2]]), [(0, 0, 1)])
+    with pytest.raises(BolusError, match="faces have no area"):
+        render_views(np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]), np.array([[0, 1, 2]]), [(0, 0, 1)])
 
 
 # ------------------------------------------------------------------ descriptors
