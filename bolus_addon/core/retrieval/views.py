@@ -7,9 +7,9 @@
 * `photo_descriptor(rgb)`: the photo's silhouette (`photo_silhouette`: the seed's entropy edges and
   spectral contour with a background model) described the same way -> (1, D);
 * `ViewIndex(library)`: every view of every model stacked into one matrix, with each descriptor
-  group's weight 1 / (its mean L1 distance between library views); `rank(query)`: one vectorised
-  weighted L1 distance to all views, a model's distance = its best view (``np.minimum.reduceat``),
-  divided by the number of groups (about 1 for unrelated shapes), best first, ties by name.
+  group's weight GROUP_WEIGHT / (its mean L1 distance between library views); `rank(query)`: one
+  vectorised weighted L1 distance to all views, a model's distance = its best view
+  (``np.minimum.reduceat``), divided by the weights' sum (about 1 for unrelated shapes), best first.
 
 Design notes: docs/design/retrieval.md.
 """
@@ -32,6 +32,9 @@ NAME = "VIEWS"
 DIRECTIONS = 40  #: view directions on the half sphere (as 80 on the whole sphere: mirrors are alike)
 RENDER_PX = 128  #: silhouette side in pixels
 PAIRS = 4000  #: random view pairs that set the group weights
+#: each descriptor group's weight after its scaling (measured: the Fourier group adds nothing on whole photos and
+#: costs on cut or occluded ones, docs/design/retrieval.md; it stays in the cache for other weights)
+GROUP_WEIGHT = {"zernike": 1.0, "fourier": 0.0}
 CUT_WARN = 0.03  #: a photo whose outline lies on the frame's edge for more than this share is warned
 SETTINGS = {"method": "views: silhouettes, Zernike + Fourier, L1 best view", "directions": DIRECTIONS,
             "render_px": RENDER_PX, "grid": sd.GRID, "order": sd.ORDER, "bins": sd.BINS, "harmonics": sd.HARMONICS}
@@ -87,16 +90,16 @@ def photo_descriptor(rgb, rng=0) -> ViewsDescriptor:
 
 
 def group_weights(M: np.ndarray, rng=0) -> np.ndarray:
-    """(D,) weights: 1 / the mean L1 distance of each group (`shape_descriptors.GROUPS`) over random pairs
-    of the rows of M (k, D) (1 where the rows are all alike)."""
+    """(D,) weights: GROUP_WEIGHT / the mean L1 distance of each group (`shape_descriptors.GROUPS`) over random
+    pairs of the rows of M (k, D) (GROUP_WEIGHT where the rows are all alike)."""
     g = np.random.default_rng(rng)
     n = len(M)
     i, j = g.integers(0, n, PAIRS), g.integers(0, n, PAIRS)
     diff = np.abs(M[i].astype(np.float64) - M[j])
     w = np.ones(M.shape[1])
-    for sl in sd.GROUPS.values():
+    for name, sl in sd.GROUPS.items():
         mean = float(diff[:, sl].sum(axis=1).mean()) if n > 1 else 0.0
-        w[sl] = 1.0 / mean if mean > 1e-12 else 1.0
+        w[sl] = GROUP_WEIGHT[name] / mean if mean > 1e-12 else GROUP_WEIGHT[name]
     return w
 
 
@@ -117,7 +120,7 @@ class ViewIndex:
 
     def distances(self, q: np.ndarray) -> np.ndarray:
         """(models,) each model's best-view distance to the query row q (D,)."""
-        d = np.abs(self.M - np.asarray(q, np.float32).ravel()) @ self.w / len(sd.GROUPS)
+        d = np.abs(self.M - np.asarray(q, np.float32).ravel()) @ self.w / sum(GROUP_WEIGHT.values())
         return np.minimum.reduceat(d, self.starts)
 
     def rank(self, query: ViewsDescriptor) -> list[tuple[str, float]]:

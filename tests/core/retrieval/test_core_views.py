@@ -210,7 +210,7 @@ def test_vectorised_ranking_is_the_best_view_distance(library):
     q = library["pear"].matrix[5] * 1.03
     got = dict(index.rank(views.ViewsDescriptor(q[None], "photo", 1)))
     for name, d in library.items():  # one model at a time, plain loops
-        best = min(float(np.sum(index.w * np.abs(row - q))) / len(sd.GROUPS) for row in d.matrix)
+        best = min(float(np.sum(index.w * np.abs(row - q))) / sum(views.GROUP_WEIGHT.values()) for row in d.matrix)
         assert got[name] == pytest.approx(best, rel=1e-4)
     with pytest.raises(BolusError, match="library is empty"):
         views.ViewIndex({})
