@@ -181,11 +181,11 @@ def test_skeleton_method_beside_the_views_in_one_cache(bpy_addon, scene, tmp_pat
     reports(capfd)
     assert bpy.ops.bolus.retrieve(filepath=photo, directory=str(lib), count=3, method="SKELETON") == {"FINISHED"}
     out = reports(capfd)
-    assert "3 library models described first" in out and "Experimental" in out
+    assert "3 library models described first" in out and "Experimental: in the benchmark" in out
     assert json.loads(bpy.context.scene["bolus_retrieval_info"])["method"] == "SKELETON"
     assert bpy.ops.bolus.retrieve(filepath=photo, directory=str(lib), count=3) == {"FINISHED"}
     out = reports(capfd)
-    assert "described first" not in out and "Experimental" not in out
+    assert "described first" not in out and "every whole, unoccluded one" in out
     assert json.loads(bpy.context.scene["bolus_retrieval"])[0]["model"] == "ellipsoid.stl"
 
 
