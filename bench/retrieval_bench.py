@@ -985,7 +985,8 @@ def report(payload: dict, argv) -> str:
                         for c in payload["classes"])
     return (f"## Retrieval from a photo (`bench/retrieval_bench.py`)\n\n"
             f"{run_line('retrieval_bench.py', argv)}\n\n"
-            f"VIEWS (the default: each model's silhouettes from 40 directions, Zernike + Fourier descriptors, the "
+            f"VIEWS (the default: each model's silhouettes from 40 directions, Zernike descriptors (the Fourier group "
+            f"cached, weight 0), the "
             f"photo's silhouette from the seed's entropy edges and spectral contour with a background model) beside "
             f"SKELETON (the seed's chapter 5: feature skeletons, ICP) and HU (log Hu moment invariants of the object "
             f"mask against each model's best of {len(canonical_directions())} silhouettes) on the same photos; top-1 "
