@@ -223,3 +223,30 @@ def test_bad_photos_and_models_leave_scene_and_cache_untouched(bpy_addon, scene,
     assert {o.name for o in bpy.data.objects} == names and bpy.context.scene.get("bolus_retrieval") == last
     assert (lib / "bolus_library.npz").read_bytes() == cache
     assert not list(lib.glob("*.tmp"))
+
+
+def test_a_near_tie_is_warned_in_the_report_and_the_panel(bpy_addon, scene, tmp_path, capfd):
+    """Two copies of the photographed model: their distances are equal, the confidence 0 and a near tie is
+    warned; the panel says so."""
+    bpy = bpy_addon
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    V, F = ellipsoid()
+    write_binary(lib / "ellipsoid.stl", V, F)
+    write_binary(lib / "ellipsoid_copy.stl", V, F)
+    write_obj(lib / "torus.obj", *torus(50.0, 16.0, 40, 14))
+    me = bpy.data.meshes.new("query")
+    me.from_pydata(V.tolist(), [], F.tolist())
+    q = bpy.data.objects.new("query", me)
+    bpy.context.scene.collection.objects.link(q)
+    photo = render_object(bpy, q, tmp_path / "photo.png")
+    reports(capfd)
+    assert bpy.ops.bolus.retrieve(filepath=photo, directory=str(lib), count=3) == {"FINISHED"}
+    out = reports(capfd)
+    found = json.loads(bpy.context.scene["bolus_retrieval"])
+    assert {found[0]["model"], found[1]["model"]} == {"ellipsoid.stl", "ellipsoid_copy.stl"}
+    assert "near tie: the photo hardly tells" in out
+    info = json.loads(bpy.context.scene["bolus_retrieval_info"])
+    assert info["tie"] and info["confidence"] == 0.0
+    labels = [t for kind, t in draw_panel(bpy) if kind == "label"]
+    assert "Near tie: look at both before choosing" in labels
