@@ -214,3 +214,14 @@ def test_vectorised_ranking_is_the_best_view_distance(library):
         assert got[name] == pytest.approx(best, rel=1e-4)
     with pytest.raises(BolusError, match="library is empty"):
         views.ViewIndex({})
+
+
+def test_an_object_cut_by_the_frame_is_warned():
+    V, F = shapes()["slab"]
+    img, truth = photo(V, F, unseen_directions(1, 5)[0], 1)
+    whole = views.photo_descriptor(img)
+    assert whole.cut == 0.0 and whole.warnings() == []
+    cols = np.flatnonzero(truth.any(axis=0))
+    cut = img[:, (cols[0] + cols[-1]) // 2 - 60:]  # the left part of the object out of the frame
+    d = views.photo_descriptor(cut)
+    assert d.cut > views.CUT_WARN and "touches the photo's edge" in d.warnings()[0]
