@@ -72,12 +72,14 @@ from benchutil import (  # noqa: E402
     versions,
 )
 
+from retrieval_photos import KINDS, composite, photos_of  # noqa: E402
+
 from bolus_addon.core.errors import BolusError  # noqa: E402
 from bolus_addon.core.mesh.objfile import load_obj  # noqa: E402
 from bolus_addon.core.retrieval.metrics import query_scores, summarise  # noqa: E402
 
 SEED = 0
-SEED_NAME, HU_NAME = "SEED", "HU"
+VIEWS_NAME, SEED_NAME, HU_NAME = "VIEWS", "SKELETON", "HU"
 VARIANTS = ("original", "turned", "noisy")
 NOISE_EDGE = 0.3  # the noisy variant: gaussian vertex noise, sigma per axis = this x the mean edge length
 TURN_SCALE = (1.2, 1.6)  # the turned variant's uniform scale range
@@ -104,13 +106,15 @@ MESHES = [
 ]
 QUICK_CLASSES = ("chest", "elbow", "face patch", "knee")
 
-#: (name, azimuth from the front about the up axis, elevation), degrees
-VIEWS = [("front", 10.0, 10.0), ("3/4", 45.0, 20.0), ("side", 80.0, 5.0)]
-#: per view: background sRGB, object sRGB, Workbench studio light
+QUERY_VIEWS = 2  #: unseen views per class (random turn, tilt and camera roll, seeded by the class name)
+ROLL_DEG = 25.0  #: the camera's roll about its axis, at most
+#: the two lights of every view: (background sRGB, object sRGB, Workbench studio light); A for every kind but
+#: 'light', which takes B over a gradient background (retrieval_photos.py)
 STYLES = [((0.78, 0.84, 0.93), (0.80, 0.62, 0.52), "studio.sl"),
-          ((0.93, 0.89, 0.80), (0.45, 0.52, 0.62), "outdoor.sl"),
-          ((0.16, 0.20, 0.26), (0.88, 0.84, 0.74), "basic.sl")]
-CONDITIONS = ("clean", "noise", "occlusion")
+          ((0.93, 0.89, 0.80), (0.45, 0.52, 0.62), "outdoor.sl")]
+CONDITIONS = KINDS
+SCALE_SIZES = (50, 1000)  #: library sizes of the query-time rows (copies of the bench's models)
+SCALE_QUERIES = 5  #: photos timed at each size
 
 
 # ------------------------------------------------------------------ the library
@@ -347,37 +351,66 @@ def srgb_to_linear(c):
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-def render_queries(models: list[tuple], views, out_dir: Path) -> tuple[list[dict], float]:
-    """Render every (class, V, F, up, front) from every view with Blender's Workbench engine.
+def query_views(cls: str, count: int = QUERY_VIEWS, rng=SEED) -> list[tuple]:
+    """``count`` unseen views of a class: (name, azimuth from the front about the up axis, elevation, camera roll),
+    degrees; azimuth anywhere, elevation -20..50, roll within ROLL_DEG, seeded by ``rng`` and the class name."""
+    g = np.random.default_rng([int(rng), zlib.crc32(f"views of {cls}".encode())])
+    return [(f"view {k + 1}", float(g.uniform(0, 360)), float(g.uniform(-20, 50)),
+             float(g.uniform(-ROLL_DEG, ROLL_DEG))) for k in range(count)]
 
-    Returns (one dict per render: class, view, view direction, style, path, rgb (H,W,3) uint8), seconds)."""
-    import bpy  # noqa: PLC0415  (the bench imports bpy only here)
-    from mathutils import Matrix  # noqa: PLC0415
-    from PIL import Image  # noqa: PLC0415
 
+def _camera(V, up: str, front: str, view, diag: float):
+    """(4,4) camera matrix and ortho scale of a view (name, azimuth, elevation[, roll]) of V, and its direction."""
+    az, el = view[1], view[2]
+    roll = math.radians(view[3]) if len(view) > 3 else 0.0
+    d = view_direction(up, front, az, el)
+    R = view_frame(d, _axis(up))
+    c, s_ = math.cos(roll), math.sin(roll)
+    R = np.column_stack([c * R[:, 0] + s_ * R[:, 1], -s_ * R[:, 0] + c * R[:, 1], R[:, 2]])
+    P = V @ R[:, :2]
+    w, h = np.ptp(P, axis=0)
+    mid = (P.min(axis=0) + P.max(axis=0)) / 2
+    M = np.eye(4)
+    M[:3, :3] = R
+    M[:3, 3] = R[:, 0] * mid[0] + R[:, 1] * mid[1] + 2.0 * diag * d
+    return M, float(max(w, h * WIDTH / HEIGHT) * 1.25), d
+
+
+def _render_scene(bpy):
     from blender_scene import empty_scene  # noqa: PLC0415
 
-    t0 = time.perf_counter()
     sc = empty_scene(bpy)
     sc.render.engine = "BLENDER_WORKBENCH"
-    sc.view_settings.view_transform = "Standard"  # the background renders as the colour given
+    sc.view_settings.view_transform = "Standard"
     sc.view_settings.look = "None"
     sc.display.render_aa = "8"
-    sc.render.film_transparent = False
+    sc.render.film_transparent = True  # the object on a transparent film: the backgrounds come later
     sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = WIDTH, HEIGHT, 100
     sc.render.image_settings.file_format = "PNG"
-    sc.render.image_settings.color_mode = "RGB"
-    shading = sc.display.shading
-    shading.light = "STUDIO"
-    shading.color_type = "SINGLE"
-    shading.show_cavity = False
-    world = bpy.data.worlds.new("retrieval_bench")
-    sc.world = world
+    sc.render.image_settings.color_mode = "RGBA"
+    sc.display.shading.light = "STUDIO"
+    sc.display.shading.color_type = "SINGLE"
+    sc.display.shading.show_cavity = False
     cam_data = bpy.data.cameras.new("retrieval_bench")
     cam_data.type = "ORTHO"
     cam = bpy.data.objects.new("retrieval_bench", cam_data)
     sc.collection.objects.link(cam)
     sc.camera = cam
+    return sc, cam, cam_data
+
+
+def render_queries(models: list[tuple], views, out_dir: Path) -> tuple[list[dict], float]:
+    """Render every (class, V, F, up, front) from its views (a list, or {class: list}) with Blender's Workbench
+    engine on a transparent film, in both lights of ``STYLES``.
+
+    Returns (one dict per view: class, view, direction, rgba and rgba_light (H,W,4) float, rgb (H,W,3) uint8 =
+    light A over its background, background, light, path), seconds)."""
+    import bpy  # noqa: PLC0415  (the bench imports bpy only here)
+    from mathutils import Matrix  # noqa: PLC0415
+    from PIL import Image  # noqa: PLC0415
+
+    t0 = time.perf_counter()
+    sc, cam, cam_data = _render_scene(bpy)
     out = []
     try:
         for cls, V, F, up, front in models:
@@ -387,31 +420,25 @@ def render_queries(models: list[tuple], views, out_dir: Path) -> tuple[list[dict
             ob = bpy.data.objects.new(slug(cls), me)
             sc.collection.objects.link(ob)
             diag = float(np.linalg.norm(np.ptp(V, axis=0)))
-            for k, (vname, az, el) in enumerate(views):
-                bg, colour, light = STYLES[k % len(STYLES)]
-                world.color = tuple(srgb_to_linear(bg))
-                shading.single_color = tuple(srgb_to_linear(colour))
-                shading.studio_light = light
-                d = view_direction(up, front, az, el)
-                R = view_frame(d, _axis(up))
-                P = V @ R[:, :2]
-                w, h = np.ptp(P, axis=0)
-                mid = (P.min(axis=0) + P.max(axis=0)) / 2
-                cam_data.ortho_scale = float(max(w, h * WIDTH / HEIGHT) * 1.25)  # spans the width
+            for view in (views[cls] if isinstance(views, dict) else views):
+                M, cam_data.ortho_scale, d = _camera(V, up, front, view, diag)
                 cam_data.clip_start, cam_data.clip_end = 0.01 * diag, 4.0 * diag
-                M = np.eye(4)
-                M[:3, :3] = R
-                M[:3, 3] = R[:, 0] * mid[0] + R[:, 1] * mid[1] + 2.0 * diag * d
                 cam.matrix_world = Matrix(M.tolist())
-                path = out_dir / f"{slug(cls)}_{vname.replace('/', '-')}.png"
-                sc.render.filepath = str(path)
-                with captured_output() as said:
-                    res = bpy.ops.render.render(write_still=True)
-                if res != {"FINISHED"} or not path.exists():
-                    raise RuntimeError(f"render of {cls} {vname} returned {res}:\n{said()}")
-                rgb = np.asarray(Image.open(path).convert("RGB"))
-                out.append({"class": cls, "view": vname, "direction": d.tolist(), "background": bg,
-                            "object_colour": colour, "light": light, "path": str(path), "rgb": rgb})
+                rgba = []
+                for k, (bg, colour, light) in enumerate(STYLES):
+                    sc.display.shading.single_color = tuple(srgb_to_linear(colour))
+                    sc.display.shading.studio_light = light
+                    path = out_dir / f"{slug(cls)}_{view[0].replace('/', '-').replace(' ', '')}_{k}.png"
+                    sc.render.filepath = str(path)
+                    with captured_output() as said:
+                        res = bpy.ops.render.render(write_still=True)
+                    if res != {"FINISHED"} or not path.exists():
+                        raise RuntimeError(f"render of {cls} {view[0]} returned {res}:\n{said()}")
+                    rgba.append(np.asarray(Image.open(path).convert("RGBA"), float) / 255.0)
+                bg, colour, light = STYLES[0]
+                out.append({"class": cls, "view": view[0], "direction": d.tolist(), "background": bg,
+                            "object_colour": colour, "light": light, "path": str(path), "rgba": rgba[0],
+                            "rgba_light": rgba[1], "rgb": composite(rgba[0], bg)})
             bpy.data.objects.remove(ob, do_unlink=True)
             bpy.data.meshes.remove(me)
     finally:
@@ -455,42 +482,30 @@ def occlude(rgb: np.ndarray, mask: np.ndarray, share: float, rng, colour=OCCLUDE
 
 
 def make_queries(renders: list[dict], conditions=CONDITIONS, rng=SEED) -> list[dict]:
-    """Each render as it is, with noise and with an occluder (``conditions``): one dict per query (id,
-    class, view, condition, rgb, background, occluded share); the noise and the occluder of a render
-    are seeded by ``rng`` and its class and view."""
+    """One query per kind (``conditions``, retrieval_photos.KINDS) of every render; the noise, crop and occluder
+    of a render are seeded by ``rng`` and its class and view."""
     out = []
     for r in renders:
-        g = np.random.default_rng([int(rng), zlib.crc32(f"{r['class']} / {r['view']}".encode())])
-        base = {k: r[k] for k in ("class", "view", "background", "light", "path")}
-        for cond in conditions:
-            extra = {}
-            if cond == "clean":
-                rgb = r["rgb"]
-            elif cond == "noise":
-                rgb = add_noise(r["rgb"], PHOTO_NOISE, g)
-            elif cond == "occlusion":
-                rgb, covered = occlude(r["rgb"], object_mask(r["rgb"], r["background"]), OCCLUDED, g)
-                extra["occluded_share"] = covered
-            else:
-                raise ValueError(f"unknown condition {cond!r}")
-            out.append({"id": f"{r['class']} / {r['view']} / {cond}", **base, "condition": cond, "rgb": rgb,
-                        **extra})
+        out += photos_of(r, occlude, object_mask, conditions, rng)
     return out
 
 
 # ------------------------------------------------------------------ the methods
 
 
-def retrieval_api():
-    """core.retrieval's model_descriptor, photo_descriptor, rank (BolusError naming what is missing)."""
+def retrieval_api(method: str = "SKELETON"):
+    """The module of a core.retrieval method (model_descriptor, photo_descriptor, rank), BolusError naming what
+    is missing."""
     try:
-        from bolus_addon.core.retrieval import library as retrieval  # noqa: PLC0415
+        from bolus_addon.core.retrieval import library  # noqa: PLC0415
+        mod = library.method_module(method)
     except ImportError as exc:
         raise BolusError(f"core.retrieval cannot be imported: {exc}") from None
-    missing = [n for n in ("model_descriptor", "photo_descriptor", "rank") if not hasattr(retrieval, n)]
+    missing = [n for n in ("model_descriptor", "photo_descriptor", "rank") if not hasattr(mod, n)]
     if missing:
-        raise BolusError(f"core.retrieval has no {', '.join(missing)} yet")
-    return retrieval
+        raise BolusError(f"core.retrieval's {method} has no {', '.join(missing)} yet")
+    mod.read_model = library.read_model
+    return mod
 
 
 def _clock():
@@ -524,10 +539,10 @@ def score_query(q: dict, ranked: list[str], rel: dict) -> dict:
             "top5": ranked[:5]}
 
 
-def run_seed(library: list[dict], queries: list[dict], rel: dict, repeat: int = 1) -> dict:
-    """The seed's method: model descriptors of the library, photo descriptors of the queries, ICP ranking
+def run_core(method: str, library: list[dict], queries: list[dict], rel: dict, repeat: int = 1) -> dict:
+    """A core.retrieval method: model descriptors of the library, photo descriptors of the queries, ranking
     (each descriptor timed best of ``repeat`` runs)."""
-    api = retrieval_api()
+    api = retrieval_api(method)
     models = []
     descriptors = {}
     for m in library:
@@ -535,7 +550,7 @@ def run_seed(library: list[dict], queries: list[dict], rel: dict, repeat: int = 
         descriptors[m["name"]], wall, cpu = best_of(lambda: api.model_descriptor(V, F, rng=SEED), repeat)
         models.append({"name": m["name"], "class": m["class"], "variant": m["variant"], "vertices": len(V),
                        "wall_s": wall, "cpu_s": cpu})
-        print(f"   SEED model {m['name']:<28} {len(V):>6} vertices {wall:7.2f} s", flush=True)
+        print(f"   {method} model {m['name']:<28} {len(V):>6} vertices {wall:7.2f} s", flush=True)
     names = [m["name"] for m in library]
     rows, photos, comparisons = [], [], []
     for k, q in enumerate(queries):
@@ -546,21 +561,29 @@ def run_seed(library: list[dict], queries: list[dict], rel: dict, repeat: int = 
             wall, cpu = _since(t)
             photos.append({"id": q["id"], "wall_s": wall, "cpu_s": cpu, "error": str(exc)})
             rows.append({**score_query(q, fallback_ranking(names, SEED + k), rel), "error": str(exc)})
-            print(f"   SEED {q['id']:<36} FAILED: {exc}", flush=True)
+            print(f"   {method} {q['id']:<36} FAILED: {exc}", flush=True)
             continue
         photos.append({"id": q["id"], "wall_s": wall, "cpu_s": cpu, "pixels": int(np.prod(q["rgb"].shape[:2])),
                        "contour_points": int(getattr(d, "size", 0))})
         t = _clock()
         ranking = api.rank(d, descriptors)
         rw, rc = _since(t)
-        comparisons.append({"wall_s": rw / len(names), "cpu_s": rc / len(names)})
+        comparisons.append({"wall_s": rw / len(names), "cpu_s": rc / len(names), "ranking_s": rw})
         ranked = [n for n, _ in ranking]
         row = score_query(q, ranked, rel)
         row["scores"] = {n: float(s) for n, s in ranking[:5]}
         rows.append(row)
-        print(f"   SEED {q['id']:<36} first right answer at {row['first_rank']:>2}  ADR {row['ADR']:.3f}  photo "
-              f"{wall:5.2f} s, ranking {rw:5.2f} s  best {ranked[0]}", flush=True)
+        print(f"   {method} {q['id']:<36} first right answer at {row['first_rank']:>2}  ADR {row['ADR']:.3f}  "
+              f"photo {wall:5.2f} s, ranking {rw:6.3f} s  best {ranked[0]}", flush=True)
     return {"queries": rows, "models": models, "photos": photos, "comparisons": comparisons}
+
+
+def run_views(library, queries, rel, repeat: int = 1) -> dict:
+    return run_core("VIEWS", library, queries, rel, repeat)
+
+
+def run_seed(library, queries, rel, repeat: int = 1) -> dict:
+    return run_core("SKELETON", library, queries, rel, repeat)
 
 
 def run_hu(library: list[dict], queries: list[dict], rel: dict, repeat: int = 1) -> dict:
@@ -662,15 +685,20 @@ def _f(x, fmt=".3f"):
     return "–" if x is None else format(x, fmt)
 
 
+TARGETS = {"top1": 0.90, "first_rank": 1.2, "ADR": 0.86}  #: what the view matcher should reach
+
+
 def accuracy_table(methods: dict, chance_row: dict | None, q: int, N: int) -> Table:
-    t = Table([("method", "<"), ("queries", "<"), ("count", ">"), ("failed", ">"), ("ADR", ">"), ("MR", ">"),
-               ("LR", ">"), ("top-1 %", ">")])
-    t.add("seed Table 5-2 (q = 20, their set)", "–", "–", "–", _f(SEED_TABLE["ADR"], ".4f"),
-          _f(SEED_TABLE["MR"], ".1f"), _f(SEED_TABLE["LR"], ".4f"), "–")
-    t.add(f"ideal here (q = {q}, N = {N})", "–", "–", "–", "1.000", f"{(q + 1) / 2:.2f}", "1.000", "100.0")
+    t = Table([("method", "<"), ("photos", "<"), ("count", ">"), ("failed", ">"), ("top-1 %", ">"),
+               ("mean 1st rank", ">"), ("ADR", ">"), ("MR", ">"), ("LR", ">")])
+    t.add("seed Table 5-2 (q = 20, their set)", "–", "–", "–", "–", "–", _f(SEED_TABLE["ADR"], ".4f"),
+          _f(SEED_TABLE["MR"], ".1f"), _f(SEED_TABLE["LR"], ".4f"))
+    t.add("target", "all", "–", "–", f"≥ {100 * TARGETS['top1']:.0f}", f"≤ {TARGETS['first_rank']}",
+          f"≥ {TARGETS['ADR']}", "–", "–")
+    t.add(f"ideal here (q = {q}, N = {N})", "–", "–", "–", "100.0", "1.00", "1.000", f"{(q + 1) / 2:.2f}", "1.000")
     if chance_row:
-        t.add("random ranking", "all", chance_row["queries"], "–", _f(chance_row["ADR"]), _f(chance_row["MR"], ".2f"),
-              _f(chance_row["LR"]), _f(100 * chance_row["top1"], ".1f"))
+        t.add("random ranking", "all", chance_row["queries"], "–", _f(100 * chance_row["top1"], ".1f"), "–",
+              _f(chance_row["ADR"]), _f(chance_row["MR"], ".2f"), _f(chance_row["LR"]))
     for name, res in methods.items():
         if "error" in res:
             t.add_error(name, res["error"])
@@ -678,8 +706,10 @@ def accuracy_table(methods: dict, chance_row: dict | None, q: int, N: int) -> Ta
         s = res["summary"]
         groups = [("all", s["all"])] + [(c, v) for c, v in s["condition"].items()]
         for label, g in groups:
-            t.add(name, label, g["queries"], g["failed"], _f(g["ADR"]), _f(g["MR"], ".2f"), _f(g["LR"]),
-                  _f(100 * g["top1"], ".1f"))
+            rows = [r for r in res["queries"] if label == "all" or r["condition"] == label]
+            first = float(np.mean([r["first_rank"] for r in rows]))
+            t.add(name, label, g["queries"], g["failed"], _f(100 * g["top1"], ".1f"), _f(first, ".2f"),
+                  _f(g["ADR"]), _f(g["MR"], ".2f"), _f(g["LR"]))
     return t
 
 
@@ -719,6 +749,7 @@ def timing_table(methods: dict) -> Table:
                ("largest under 3,000 vertices s", ">"), ("per photo s (wall / CPU)", ">"), ("largest photo s", ">"),
                ("pixels", ">"), ("contour points", ">"), ("per comparison s", ">")])
     t.add("seed 5.4 (MATLAB, i7)", "–", "–", "–", "< 50", "≈ 5", "–", "120000", "–", "≈ 0.33")
+    t.add("target (VIEWS)", "≤ 2", "–", "–", "–", "–", "–", "–", "–", "–")
     for name, res in methods.items():
         if "error" in res:
             t.add_error(name, res["error"])
@@ -739,8 +770,8 @@ def timing_table(methods: dict) -> Table:
 
 
 def model_time_table(methods: dict) -> Table:
-    """The seed method's descriptor time of every library model (the seed's Figure 5-7 (a))."""
-    res = methods.get(SEED_NAME, {})
+    """The view matcher's build time of every library model (as the seed's Figure 5-7 (a))."""
+    res = methods.get(VIEWS_NAME, {})
     t = Table([("model", "<"), ("vertices", ">"), ("wall s", ">"), ("CPU s", ">")])
     for m in sorted(res.get("models", []), key=lambda m: m["vertices"]):
         t.add(m["name"], m["vertices"], _f(m["wall_s"], ".2f"), _f(m["cpu_s"], ".2f"))
@@ -751,26 +782,31 @@ def model_time_table(methods: dict) -> Table:
 
 
 def warm_up() -> None:
-    """Imports and caches, so no timed call pays for them (the seed's method only when it is there)."""
+    """Imports and caches, so no timed call pays for them (the core methods only when they are there)."""
     import meshgen  # noqa: PLC0415  (tests/meshgen.py)
 
     V, F = meshgen.icosphere(2, 30.0)
     hu_features(silhouette(V, F, (0.0, 0.0, 1.0)))
-    try:
-        api = retrieval_api()
-    except BolusError:
-        return
-    with __import__("contextlib").suppress(Exception):
-        api.model_descriptor(V, F, rng=SEED)
-        img = np.full((120, 160, 3), 200, np.uint8)
-        img[30:90, 50:110] = 60
-        api.photo_descriptor(img, rng=SEED)
+    for method in ("VIEWS", "SKELETON"):
+        try:
+            api = retrieval_api(method)
+        except BolusError:
+            continue
+        with __import__("contextlib").suppress(Exception):
+            api.model_descriptor(V, F, rng=SEED)
+            img = np.full((120, 160, 3), 200, np.uint8)
+            img[30:90, 50:110] = 60
+            api.photo_descriptor(img, rng=SEED)
 
 
 def main(argv=None) -> int:
-    ap = parser(__doc__, "4 small classes (chest, elbow, face patch, knee), the front view only", repeat=1)
+    ap = parser(__doc__, "4 small classes (chest, elbow, face patch, knee), one view each", repeat=1)
     ap.add_argument("--only", metavar="NAME", action="append", default=[],
                     help="only the classes whose name contains NAME (repeatable)")
+    ap.add_argument("--methods", default=",".join((VIEWS_NAME, SEED_NAME, HU_NAME)),
+                    help="the methods to run, comma-separated (default: all three)")
+    ap.add_argument("--no-scale", action="store_true", help="leave out the build and query times at 50 and 1,000 "
+                    "models")
     ap.add_argument("--out", metavar="DIR", help="keep the library and the query photos in DIR (default: a temp "
                     "folder, removed)")
     args = ap.parse_args(argv)
@@ -780,10 +816,10 @@ def main(argv=None) -> int:
     t_start = time.perf_counter()
     chosen = [m for m in MESHES if (not args.quick or m[0] in QUICK_CLASSES)
               and (not args.only or any(o in m[0] for o in args.only))]
-    views = VIEWS[:1] if args.quick else VIEWS
+    views = {m[0]: query_views(m[0], 1 if args.quick else QUERY_VIEWS) for m in chosen}
     work = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bolus_retrieval_bench_"))
     try:
-        payload = run(chosen, views, work, args.repeat)
+        payload = run(chosen, views, work, args.repeat, args.methods.split(","), scale=not args.no_scale)
     finally:
         if not args.out:
             shutil.rmtree(work, ignore_errors=True)
@@ -793,8 +829,8 @@ def main(argv=None) -> int:
     return 0
 
 
-def run(chosen, views, work: Path, repeat: int = 1) -> dict:
-    """Library, renders, queries, both methods; the JSON payload (without the photos)."""
+def load_classes(chosen) -> tuple[list[dict], dict, list[str]]:
+    """(class rows, {class: (V, F, up, front)}, skipped classes) of the chosen MESHES."""
     classes, data, skipped = [], {}, []
     for cls, file, scale, up, front, note in chosen:
         if not mesh_path(file).exists():
@@ -807,6 +843,61 @@ def run(chosen, views, work: Path, repeat: int = 1) -> dict:
                         "bbox_mm": np.ptp(V, axis=0).tolist(), "up": up, "front": front})
     if not classes:
         raise BolusError("no mesh of the library was found")
+    return classes, data, skipped
+
+
+def nearest_views(renders: list[dict]) -> dict:
+    """The angle (degrees) from each query view to the nearest library view, for both libraries of views."""
+    from bolus_addon.core.retrieval.view_render import fibonacci_directions  # noqa: PLC0415
+    from bolus_addon.core.retrieval.views import DIRECTIONS  # noqa: PLC0415
+
+    out = {}
+    for key, dirs, mirror in (("HU", canonical_directions(), False), ("VIEWS", fibonacci_directions(DIRECTIONS),
+                                                                       True)):
+        ang = []
+        for r in renders:
+            c = dirs @ np.asarray(r["direction"])
+            ang.append(float(np.degrees(np.arccos(np.clip((np.abs(c) if mirror else c).max(), -1.0, 1.0)))))
+        out[key] = {"min": min(ang), "max": max(ang), "mean": float(np.mean(ang))}
+    return out
+
+
+def run_methods(names: list[str], library, queries, rel, repeat) -> dict:
+    fns = {VIEWS_NAME: run_views, SEED_NAME: run_seed, HU_NAME: run_hu}
+    methods = {}
+    for name in names:
+        print(f"== {name}", flush=True)
+        try:
+            res = fns[name](library, queries, rel, repeat)
+            res["summary"] = summaries(res["queries"])
+            res["most_often_first"] = most_often_first(res["queries"])
+            res["timing"] = timing(res)
+            methods[name] = res
+        except Exception as exc:  # a benchmark reports, it does not stop at the first failure
+            methods[name] = error_row("method", name, exc)
+    return methods
+
+
+def scale_rows(lib_dir: Path, work: Path, queries: list[dict]) -> dict:
+    """Build times (1 and 2 at a time) and query times at SCALE_SIZES models (retrieval_scale.py)."""
+    import retrieval_scale  # noqa: PLC0415
+
+    print("== build and query times at scale", flush=True)
+    try:
+        builds = retrieval_scale.build_times(lib_dir, work)
+        library_mod = __import__("bolus_addon.core.retrieval.library", fromlist=["x"])
+        keep, todo, _ = library_mod.plan_update(lib_dir, "VIEWS")
+        library_mod.update_library(lib_dir, [(p, p) for p in todo], keep, lambda *a: None, 0, 1, "VIEWS")
+        photos = [q["rgb"] for q in queries if q["condition"] == "clean"][:SCALE_QUERIES]
+        return {"build": builds, "query": retrieval_scale.query_times(lib_dir, work, photos, SCALE_SIZES)}
+    except Exception as exc:  # noqa: BLE001
+        return error_row("scale", "scale", exc)
+
+
+def run(chosen, views, work: Path, repeat: int = 1, method_names=(VIEWS_NAME, SEED_NAME, HU_NAME),
+        scale: bool = True) -> dict:
+    """Library, renders, queries, the methods; the JSON payload (without the photos)."""
+    classes, data, skipped = load_classes(chosen)
     lib_dir, photo_dir = work / "library", work / "photos"
     photo_dir.mkdir(parents=True, exist_ok=True)
     t = time.perf_counter()
@@ -817,37 +908,23 @@ def run(chosen, views, work: Path, repeat: int = 1) -> dict:
     print(f"== library: {len(library)} models of {len(classes)} classes in {lib_dir} ({build_s:.1f} s)", flush=True)
     renders, render_s = render_queries([(c, V, F, up, front) for c, (V, F, up, front) in data.items()], views,
                                        photo_dir)
-    print(f"== {len(renders)} renders in {render_s:.1f} s ({render_s / max(1, len(renders)):.2f} s each, Blender "
-          f"start included)", flush=True)
+    print(f"== {len(renders)} views rendered in two lights in {render_s:.1f} s", flush=True)
     queries = make_queries(renders)
-    dirs = canonical_directions()
-    nearest = []
-    for r in renders:
-        d = np.asarray(r["direction"])
-        nearest.append(float(np.degrees(np.arccos(np.clip((dirs @ d).max(), -1.0, 1.0)))))
     warm_up()
-    methods = {}
-    for name, fn in ((SEED_NAME, run_seed), (HU_NAME, run_hu)):
-        print(f"== {name}", flush=True)
-        try:
-            res = fn(library, queries, rel, repeat)
-            res["summary"] = summaries(res["queries"])
-            res["most_often_first"] = most_often_first(res["queries"])
-            res["timing"] = timing(res)
-            methods[name] = res
-        except Exception as exc:  # a benchmark reports, it does not stop at the first failure
-            methods[name] = error_row("method", name, exc)
-    occl = [q["occluded_share"] for q in queries if "occluded_share" in q]
+    methods = run_methods(list(method_names), library, queries, rel, repeat)
+    extra = {k: [q[k] for q in queries if k in q] for k in ("occluded_share", "cropped_share")}
+    view_rows = [{"class": c, "name": v[0], "azimuth_deg": v[1], "elevation_deg": v[2], "roll_deg": v[3]}
+                 for c, vs in (views.items() if isinstance(views, dict) else []) for v in vs]
     return {"seed": SEED, "repeat": repeat, "classes": classes, "skipped": skipped,
             "library": [{k: m[k] for k in ("name", "class", "variant", "vertices", "triangles", "note")}
                         for m in library],
-            "views": [{"name": n, "azimuth_deg": a, "elevation_deg": e, "background_srgb": STYLES[k][0],
-                       "object_srgb": STYLES[k][1], "light": STYLES[k][2]} for k, (n, a, e) in enumerate(views)],
+            "views": view_rows, "styles": [{"background_srgb": b, "object_srgb": o, "light": li} for b, o, li in STYLES],
             "renders": {"count": len(renders), "seconds": render_s, "size": [WIDTH, HEIGHT],
-                        "nearest_library_view_deg": {"min": min(nearest), "max": max(nearest)}},
+                        "nearest_library_view_deg": nearest_views(renders)},
             "queries": {"count": len(queries), "conditions": list(CONDITIONS), "photo_noise_sigma": PHOTO_NOISE,
-                        "occluded_share": {"min": min(occl), "max": max(occl)} if occl else None},
-            "q": 3, "N": len(names), "chance": chance(queries, names, rel), "methods": methods}
+                        **{k: ({"min": min(v), "max": max(v)} if v else None) for k, v in extra.items()}},
+            "q": 3, "N": len(names), "chance": chance(queries, names, rel), "methods": methods,
+            "scale": scale_rows(lib_dir, work, queries) if scale and VIEWS_NAME in method_names else None}
 
 
 def hub_line(methods: dict) -> str:
@@ -861,41 +938,67 @@ def hub_line(methods: dict) -> str:
     return "Ranked first most often: " + ("; ".join(parts) if parts else "–") + "."
 
 
+def scale_table(scale) -> Table | None:
+    """Build seconds per model (1 and 2 at a time) and query seconds at 50 and 1,000 models."""
+    if not scale:
+        return None
+    t = Table([("what", "<"), ("models", ">"), ("wall s", ">"), ("per model / per query s", ">"), ("target", ">")])
+    if "error" in scale:
+        t.add_error("scale", scale["error"])
+        return t
+    for b in scale["build"]:
+        t.add(f"build, {b['jobs']} at a time", b["models"], _f(b["wall_s"], ".1f"), _f(b["per_model_s"], ".2f"),
+              "≤ 2 per model")
+    for q in scale["query"]:
+        t.add(f"query (median of {q['queries']}; folder check {q['plan_s']:.2f} s, ranking {q['ranking_s']:.3f} s)",
+              q["models"], _f(q["max_s"], ".2f") + " max", _f(q["median_s"], ".2f"),
+              "≤ 2" if q["models"] <= 50 else "≤ 5")
+    return t
+
+
+def how_line(payload: dict) -> str:
+    rq, qs = payload["renders"], payload["queries"]
+    near = rq["nearest_library_view_deg"]
+    occ, crop = qs.get("occluded_share"), qs.get("cropped_share")
+    rng = (lambda d: "–" if not d else f"{100 * d['min']:.0f}-{100 * d['max']:.0f} %")
+    return (f"{payload['N']} library models ({len(payload['classes'])} classes x original / turned / noisy, q = "
+            f"{payload['q']} right answers per query), {qs['count']} photos: {rq['count']} unseen views (random turn, "
+            f"tilt -20..50°, camera roll ±{ROLL_DEG:.0f}°; the nearest of VIEWS' library directions "
+            f"{near['VIEWS']['min']:.0f}-{near['VIEWS']['max']:.0f}° away, mean {near['VIEWS']['mean']:.0f}°, of HU's "
+            f"{near['HU']['min']:.0f}-{near['HU']['max']:.0f}°) rendered by Workbench ({rq['size'][0]} x "
+            f"{rq['size'][1]} px) in two lights, each view as one photo per kind: clean, light (the other light and "
+            f"object colour over a gradient background), noise (sigma {qs['photo_noise_sigma']}), blur (2 px), "
+            f"cropped ({rng(crop)} of the object out of the frame), phone (270 x 480 portrait), occlusion (a grey "
+            f"rectangle over {rng(occ)} of the object)")
+
+
 def report(payload: dict, argv) -> str:
     methods = payload["methods"]
     t1 = accuracy_table(methods, payload["chance"], payload["q"], payload["N"])
     t2, t3, t4 = view_table(methods), class_table(payload["classes"], methods), timing_table(methods)
-    t5 = model_time_table(methods)
-    rq = payload["renders"]
-    occ = payload["queries"]["occluded_share"]
-    views = ", ".join(f"{v['name']} (azimuth {v['azimuth_deg']:.0f}°, elevation {v['elevation_deg']:.0f}°, "
-                      f"{v['light']})" for v in payload["views"])
-    how = (f"{payload['N']} library models ({len(payload['classes'])} classes x original / turned / noisy, q = "
-           f"{payload['q']} right answers per query), {payload['queries']['count']} queries: {rq['count']} "
-           f"Workbench renders ({rq['size'][0]} x {rq['size'][1]} px, {rq['seconds']:.0f} s) from {views}, each "
-           f"clean, with noise (sigma {payload['queries']['photo_noise_sigma']}) and with a grey rectangle over "
-           + ("–" if not occ else f"{100 * occ['min']:.0f}-{100 * occ['max']:.0f} %")
-           + f" of the object; the nearest of the baseline's {len(canonical_directions())} library views is "
-           f"{rq['nearest_library_view_deg']['min']:.0f}-{rq['nearest_library_view_deg']['max']:.0f}° from a query "
-           f"view")
-    hubs = hub_line(methods)
-    print(f"\nAccuracy ({how})\n{t1.text()}\n\nPer view\n{t2.text()}\n\nPer class\n{t3.text()}\n\n{hubs}\n\n"
-          f"Times\n{t4.text()}")
-    if t5.rows:
-        print(f"\nSEED model descriptors\n{t5.text()}")
+    t5, t6 = model_time_table(methods), scale_table(payload.get("scale"))
+    how, hubs = how_line(payload), hub_line(methods)
+    print(f"\nAccuracy ({how})\n{t1.text()}\n\nPer class\n{t3.text()}\n\n{hubs}\n\nTimes\n{t4.text()}")
+    if t6:
+        print(f"\nAt scale\n{t6.text()}")
     classes = "\n".join(f"* {c['class']}: `{c['file']}`, {c['vertices']} vertices, {c['units']}"
                         for c in payload["classes"])
     return (f"## Retrieval from a photo (`bench/retrieval_bench.py`)\n\n"
             f"{run_line('retrieval_bench.py', argv)}\n\n"
-            f"SEED (the seed's chapter 5: entropy edges, spectral contour, feature skeletons, ICP) against HU "
-            f"(log Hu moment invariants of the object mask against each model's best of "
-            f"{len(canonical_directions())} rendered silhouettes); ADR, MR, LR as eqs. 5-15..5-17, averaged over "
-            f"the queries; {how}.  MR depends on q (the seed's set had q = 20, ideal 10.5; here ideal "
-            f"{(payload['q'] + 1) / 2:.1f}), so compare ADR, LR and the top-1 rate.  Classes:\n\n{classes}\n\n"
-            f"{t1.markdown()}\n\nPer view:\n\n{t2.markdown()}\n\nPer class (all views and conditions):\n\n"
+            f"VIEWS (the default: each model's silhouettes from 40 directions, Zernike descriptors (the Fourier group "
+            f"cached, weight 0), the "
+            f"photo's silhouette from the seed's entropy edges and spectral contour with a background model) beside "
+            f"SKELETON (the seed's chapter 5: feature skeletons, ICP) and HU (log Hu moment invariants of the object "
+            f"mask against each model's best of {len(canonical_directions())} silhouettes) on the same photos; top-1 "
+            f"= the right class first, mean 1st rank = the rank of the first right model; ADR, MR, LR as eqs. "
+            f"5-15..5-17, averaged over the photos; {how}.  MR depends on q (the seed's set had q = 20, ideal 10.5; "
+            f"here ideal {(payload['q'] + 1) / 2:.1f}).  Classes:\n\n{classes}\n\n"
+            f"{t1.markdown()}\n\nPer view:\n\n{t2.markdown()}\n\nPer class (all views and kinds):\n\n"
             f"{t3.markdown()}\n\n{hubs}\n\nTimes (wall clock / CPU time of the process; the seed's figures are CPU "
             f"times in MATLAB):\n\n{t4.markdown()}\n"
-            + (f"\nSEED model descriptor per library model:\n\n{t5.markdown()}\n" if t5.rows else ""))
+            + (f"\nBuild and query times at scale (2 CPUs; the 1,000 models are copies of the bench's with jittered "
+               f"descriptors, searched as Find Matching Bolus does):\n\n{t6.markdown()}\n" if t6 else "")
+            + (f"\nVIEWS build time per library model:\n\n{t5.markdown()}\n" if t5.rows else ""))
 
 
 if __name__ == "__main__":

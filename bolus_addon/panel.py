@@ -157,7 +157,9 @@ def draw_library(layout, g: Guide) -> None:
     panel_tables.draw_library_cache(col, g.context.scene)
     g.button(col, "bolus.build_library", icon="FILE_REFRESH")
     col.prop(g.s, "photo_path", text="Photo")
-    col.prop(g.s, "retrieve_count")
+    row = col.row(align=True)
+    row.prop(g.s, "retrieve_count")
+    row.prop(g.s, "retrieve_method", text="")
     g.button(col, "bolus.retrieve", icon="VIEWZOOM")
     panel_tables.draw_library_matches(box, g.context.scene)
 

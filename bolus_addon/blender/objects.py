@@ -96,6 +96,7 @@ PROP_SOLID_MESH = "bolus_solid_mesh"
 PROP_HOLES = "bolus_holes"
 #: SPEC: the scene's last retrieval; ours: the last library build (scene), an imported match's file
 PROP_RETRIEVAL = "bolus_retrieval"
+PROP_RETRIEVAL_INFO = "bolus_retrieval_info"  #: ours: the last retrieval's method, photo and confidence
 PROP_LIBRARY = "bolus_library"
 PROP_MATCH_SOURCE = "bolus_library_model"
 

@@ -30,7 +30,8 @@ OP_SETTINGS = {
     "bolus.orient_parts": {"layer_mm": "layer_mm", "skin_side_up": "skin_side_up"},
     "bolus.export_parts": {},
     "bolus.build_library": {"directory": "library_dir"},
-    "bolus.retrieve": {"filepath": "photo_path", "directory": "library_dir", "count": "retrieve_count"},
+    "bolus.retrieve": {"filepath": "photo_path", "directory": "library_dir", "count": "retrieve_count",
+                       "method": "retrieve_method"},
 }
 
 #: (number, title, icon, hint: what it does and what it needs) of every step, in order

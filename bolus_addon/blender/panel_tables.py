@@ -24,6 +24,7 @@ from .objects import (
     PROP_PATTERN_TABLE,
     PROP_PRINT_TABLE,
     PROP_RETRIEVAL,
+    PROP_RETRIEVAL_INFO,
     PROP_SUM_VARPI,
     PROP_THICKNESS_MAX,
     PROP_THICKNESS_MEAN,
@@ -175,8 +176,15 @@ def draw_library_cache(col, scene) -> None:
 
 
 def draw_library_matches(box, scene) -> None:
-    """The best matches of the last Find Matching Bolus, best first."""
+    """The best matches of the last Find Matching Bolus, best first, with the confidence of the first."""
     found = mesh_io.json_prop(scene, PROP_RETRIEVAL)
     if found:
         draw_table(box, ("#", "Model", "Dissimilarity"),
                    ((str(k), r["model"], f"{r['score']:.4g}") for k, r in enumerate(found, 1)))
+    info = mesh_io.json_prop(scene, PROP_RETRIEVAL_INFO)
+    if found and info:
+        conf = info.get("confidence", 0.0)
+        box.label(text=f"{info.get('method', '')}: confidence {100 * conf:.0f} % (the runner-up "
+                       f"{100 * conf:.0f} % farther)", icon="ERROR" if info.get("tie") else "INFO")
+        if info.get("tie"):
+            box.label(text="Near tie: look at both before choosing")

@@ -153,6 +153,10 @@ def warn_distortion_property(**kw):
     )
 
 
+RETRIEVE_METHODS = [
+    ("VIEWS", "Views", "The model's silhouettes from 40 directions against the photo's (default)"),
+    ("SKELETON", "Skeleton", "Feature skeletons and ICP, the seed's chapter 5 (for comparison)"),
+]
 PRINT_METHODS = [
     ("ABCUT", "ABcut", "Area-balanced spectral cut (seed 6.2): parts of similar area (default)"),
     ("RATIOCUT", "RatioCut", "Plain spectral cut, the seed's 'traditional method' (for comparison)"),
@@ -288,5 +292,6 @@ class BolusSettings(bpy.types.PropertyGroup):
                                 description="Folder of bolus models (.blend, .stl, .obj) to find a match in")
     photo_path: StringProperty(name="Photo", subtype="FILE_PATH", default="",
                                description="Photo of the treatment site or of a bolus (PNG, JPEG, ...)")
+    retrieve_method: EnumProperty(name="Method", items=RETRIEVE_METHODS, default="VIEWS")
     retrieve_count: IntProperty(name="Matches", description="How many of the best matches to list", default=5,
                                 min=1, soft_max=20)

@@ -5,7 +5,7 @@ disc and a rectangle and not change with scale, rotation and translation (a mirr
 the rasterised library silhouettes must cover the projection; the library must hold three members
 per class with the right relevant sets; the corruptions must do what they say; a Blender render
 and the rasterised silhouette of the same view must agree (same camera frame, same handedness).
-The whole ``--quick`` run takes about 95 s on 2 cores, so it runs only with BOLUS_BENCH_SMOKE=1.
+The whole ``--quick`` run takes a few minutes on 2 cores, so it runs only with BOLUS_BENCH_SMOKE=1.
 """
 from __future__ import annotations
 
@@ -213,11 +213,40 @@ def test_noise_occlusion_and_the_object_mask(rb):
     box[rows.min():rows.max() + 1, cols.min():cols.max() + 1] = True
     assert np.array_equal(changed, box)  # one rectangle ...
     assert np.all(occluded[changed] == np.rint(255 * np.array(rb.OCCLUDER_SRGB)))  # ... of the grey
-    render = {"class": "ball", "view": "front", "background": (0.78, 0.84, 0.93), "light": "studio.sl",
-              "path": "-", "rgb": rgb}
+
+
+
+def test_photo_kinds_do_what_they_say(rb):
+    """Each kind of query photo from one render (retrieval_photos.py): the clean one is the render over its
+    background, the cropped one has about 20 % of the object out of the frame, the phone one is a 9:16 portrait,
+    the blurred one is smoother, the 'light' one has another object colour over a gradient."""
+    import retrieval_photos as rp
+
+    H, W = 300, 400
+    yy, xx = np.mgrid[:H, :W] + 0.5
+    m = (xx - 200) ** 2 + (yy - 150) ** 2 <= 70 ** 2
+    rgba = np.zeros((H, W, 4))
+    rgba[m] = (0.8, 0.62, 0.52, 1.0)
+    light = rgba.copy()
+    light[m, :3] = (0.45, 0.52, 0.62)
+    bg = (0.78, 0.84, 0.93)
+    render = {"class": "ball", "view": "view 1", "background": bg, "light": "studio.sl", "path": "-", "rgba": rgba,
+              "rgba_light": light}
     qs = rb.make_queries([render])
-    assert [q["condition"] for q in qs] == list(rb.CONDITIONS) and qs[0]["rgb"] is rgb
-    assert qs[2]["occluded_share"] >= 0.15 and [q["id"] for q in qs][1] == "ball / front / noise"
+    assert [q["condition"] for q in qs] == list(rb.CONDITIONS) == list(rp.KINDS)
+    by = {q["condition"]: q for q in qs}
+    assert np.array_equal(by["clean"]["rgb"], painted(m, bg))
+    assert [q["id"] for q in qs][2] == "ball / view 1 / noise" and by["occlusion"]["occluded_share"] >= 0.15
+    left = by["cropped"]["cropped_share"]
+    assert 0.2 <= left < 0.25  # about CROPPED of the object out of the frame ...
+    obj = rb.object_mask(by["cropped"]["rgb"], bg)
+    assert obj.sum() == pytest.approx((1 - left) * m.sum(), rel=0.02)  # ... and what is left is in it
+    assert by["phone"]["rgb"].shape == (480, 270, 3)
+    assert np.abs(np.diff(by["blur"]["rgb"].astype(float), axis=1)).max() < np.abs(
+        np.diff(by["clean"]["rgb"].astype(float), axis=1)).max()
+    top, bottom = by["light"]["rgb"][2, 2].astype(float), by["light"]["rgb"][-3, 2].astype(float)
+    assert np.abs(top - bottom).max() > 60  # a gradient behind
+    assert np.allclose(by["light"]["rgb"][150, 200] / 255, (0.45, 0.52, 0.62), atol=0.01)
 
 
 def test_baseline_ranks_the_class_of_a_silhouette_first(rb, tmp_path):
@@ -270,21 +299,23 @@ def test_render_agrees_with_the_rasterised_silhouette(rb, tmp_path):
 
 @pytest.mark.blender
 @pytest.mark.skipif(os.environ.get("BOLUS_BENCH_SMOKE") != "1",
-                    reason="the --quick retrieval bench takes about 95 s; set BOLUS_BENCH_SMOKE=1 to run it")
+                    reason="the --quick retrieval bench takes minutes; set BOLUS_BENCH_SMOKE=1 to run it")
 def test_quick_run(rb, tmp_path):
     pytest.importorskip("bpy")
     js, md = tmp_path / "figures.json", tmp_path / "bench.md"
     assert rb.main(["--quick", "--json", str(js), "--markdown", str(md)]) == 0
     data, text = json.loads(js.read_text()), md.read_text()
-    assert data["N"] == 12 and data["queries"]["count"] == 12 and data["q"] == 3
-    for name in (rb.SEED_NAME, rb.HU_NAME):
+    kinds = len(rb.CONDITIONS)
+    assert data["N"] == 12 and data["queries"]["count"] == 4 * kinds and data["q"] == 3
+    for name in (rb.VIEWS_NAME, rb.SEED_NAME, rb.HU_NAME):
         res = data["methods"][name]
         assert "error" not in res, res
         s = res["summary"]["all"]
-        assert s["queries"] == 12 and 0 <= s["ADR"] <= 1 and 2.0 <= s["MR"] <= 11.0 and 0 <= s["LR"] <= 1
+        assert s["queries"] == 4 * kinds and 0 <= s["ADR"] <= 1 and 2.0 <= s["MR"] <= 11.0 and 0 <= s["LR"] <= 1
         assert len(res["models"]) == 12 and all(m["wall_s"] > 0 for m in res["models"])
+    assert [q["models"] for q in data["scale"]["query"]] == list(rb.SCALE_SIZES)
     assert text.lstrip().startswith("## Retrieval from a photo (`bench/retrieval_bench.py`)")
-    assert "Ranked first most often: SEED: " in text and "; HU: " in text
+    assert "Ranked first most often: VIEWS: " in text and "; HU: " in text
     for table in text.split("\n\n"):
         if table.startswith("|"):
             assert len({line.count("|") for line in table.splitlines()}) == 1

@@ -1,6 +1,8 @@
-"""`build_library` and `retrieve` in Blender (seed ch. 5): the cache is built, reused, redone
-for changed files and for a new cache version; a photo (a Workbench rendering) is described, the best
-match imported at true size and the best ones listed; bad photos and libraries are refused cleanly."""
+"""`build_library` and `retrieve` in Blender: the cache is built, reused, redone for changed files and for
+a new cache version; a photo (a Workbench rendering from a direction the library's views do not hold) finds
+its own model first with the view matcher (the default), the best match is imported at true size and the
+best ones listed with a confidence; the seed's skeleton method still runs; bad photos (tiny, all white, all
+black, no object) and bad models (no faces, broken) are refused or left out cleanly, the cache untouched."""
 from __future__ import annotations
 
 import json
@@ -77,7 +79,8 @@ def test_retrieve_imports_the_best_match_and_lists_the_best(bpy_addon, scene, tm
     me.from_pydata(V.tolist(), [], F.tolist())
     q = bpy.data.objects.new("query", me)
     bpy.context.scene.collection.objects.link(q)
-    photo = render_object(bpy, q, tmp_path / "photo.png")
+    # from above enough to see through the ring (from the side a torus's outline is an ellipse, as the egg's)
+    photo = render_object(bpy, q, tmp_path / "photo.png", direction=(0.2, -0.5, 1.0))
     bpy.data.objects.remove(q)
     bpy.ops.ed.undo_push(message="before retrieve")
     names = {o.name for o in bpy.data.objects}
@@ -87,7 +90,11 @@ def test_retrieve_imports_the_best_match_and_lists_the_best(bpy_addon, scene, tm
     found = json.loads(bpy.context.scene["bolus_retrieval"])
     assert len(found) == 2 and {r["model"] for r in found} <= {"torus.obj", "ellipsoid.stl", "ring.blend"}
     assert found[0]["score"] <= found[1]["score"]
+    assert found[0]["model"] == "torus.obj"  # the photo's own model, seen from a direction the library lacks
     assert f"Best match for photo.png: {found[0]['model']}" in out and "check it on the planning CT" in out
+    info = json.loads(bpy.context.scene["bolus_retrieval_info"])
+    assert info["method"] == "VIEWS" and info["models"] == 3
+    assert info["confidence"] == pytest.approx((found[1]["score"] - found[0]["score"]) / found[1]["score"], abs=1e-9)
     new = [o for o in bpy.data.objects if o.name not in names]
     assert len(new) == 1 and bpy.context.view_layer.objects.active is new[0]
     match = json.loads(new[0]["bolus_library_model"])
@@ -99,6 +106,7 @@ def test_retrieve_imports_the_best_match_and_lists_the_best(bpy_addon, scene, tm
     # the panel lists the matches
     labels = [t for kind, t in draw_panel(bpy) if kind == "label"]
     assert found[0]["model"] in labels and "Dissimilarity" in labels
+    assert any(t.startswith("VIEWS: confidence") for t in labels), labels
     # Ctrl+Z takes the imported model away again
     assert bpy.ops.ed.undo() == {"FINISHED"}
     assert {o.name for o in bpy.data.objects} == names
@@ -152,4 +160,93 @@ def test_retrieve_threaded_as_from_the_panel(bpy_addon, scene, tmp_path):
     op = modal_run(bpy, "retrieve", {"filepath": photo, "directory": str(lib), "count": 3}, cancel_first=False)
     found = json.loads(bpy.context.scene["bolus_retrieval"])
     assert len(found) == 3 and (lib / "bolus_library.npz").is_file()
+    assert found[0]["model"] == "ellipsoid.stl"
     assert any(r[1].startswith("Best match for photo.png") for r in op.reports), op.reports
+
+
+def test_skeleton_method_beside_the_views_in_one_cache(bpy_addon, scene, tmp_path, capfd):
+    """method='SKELETON' (the seed's chapter 5) runs on the same library; its section joins the views' in the one
+    cache file, and the views' entries are not described again."""
+    bpy = bpy_addon
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    library(bpy, lib)
+    assert bpy.ops.bolus.build_library(directory=str(lib)) == {"FINISHED"}
+    V, F = ellipsoid()
+    me = bpy.data.meshes.new("query")
+    me.from_pydata(V.tolist(), [], F.tolist())
+    q = bpy.data.objects.new("query", me)
+    bpy.context.scene.collection.objects.link(q)
+    photo = render_object(bpy, q, tmp_path / "photo.png", direction=(-0.5, -1.0, 0.2))
+    reports(capfd)
+    assert bpy.ops.bolus.retrieve(filepath=photo, directory=str(lib), count=3, method="SKELETON") == {"FINISHED"}
+    out = reports(capfd)
+    assert "3 library models described first" in out and "Experimental: in the benchmark" in out
+    assert json.loads(bpy.context.scene["bolus_retrieval_info"])["method"] == "SKELETON"
+    assert bpy.ops.bolus.retrieve(filepath=photo, directory=str(lib), count=3) == {"FINISHED"}
+    out = reports(capfd)
+    assert "described first" not in out and "every whole, unoccluded one" in out
+    assert json.loads(bpy.context.scene["bolus_retrieval"])[0]["model"] == "ellipsoid.stl"
+
+
+def write_png(path, rgb):
+    from PIL import Image
+
+    Image.fromarray(np.asarray(rgb, np.uint8)).save(path)
+    return str(path)
+
+
+def test_bad_photos_and_models_leave_scene_and_cache_untouched(bpy_addon, scene, tmp_path, capfd):
+    bpy = bpy_addon
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    library(bpy, lib)
+    (lib / "empty.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")  # a model without faces
+    (lib / "broken.stl").write_bytes(b"solid x\nfacet normal 0 0 1\n  outer loop\n")  # a cut-off ASCII STL
+    reports(capfd)
+    assert bpy.ops.bolus.build_library(directory=str(lib)) == {"FINISHED"}
+    out = reports(capfd)
+    assert "empty.obj left out of the library" in out and "broken.stl left out of the library" in out, out
+    assert "3 models (3 described" in out
+    cache = (lib / "bolus_library.npz").read_bytes()
+    names = {o.name for o in bpy.data.objects}
+    last = bpy.context.scene.get("bolus_retrieval")  # an earlier test's, or None
+    rng = np.random.default_rng(0)
+    plain = np.clip(np.array([200, 214, 237]) + rng.normal(0, 4, (240, 320, 3)), 0, 255)
+    cases = {"tiny.png": (rng.random((40, 50, 3)) * 255, r"50 x 40 pixels: at least 64 x 64"),
+             "white.png": (np.full((240, 320, 3), 255), "all white"),
+             "black.png": (np.zeros((240, 320, 3)), "all black"),
+             "nothing.png": (plain, "no object")}
+    for name, (rgb, message) in cases.items():
+        with pytest.raises(RuntimeError, match=message):
+            bpy.ops.bolus.retrieve(filepath=write_png(tmp_path / name, rgb), directory=str(lib))
+    assert {o.name for o in bpy.data.objects} == names and bpy.context.scene.get("bolus_retrieval") == last
+    assert (lib / "bolus_library.npz").read_bytes() == cache
+    assert not list(lib.glob("*.tmp"))
+
+
+def test_a_near_tie_is_warned_in_the_report_and_the_panel(bpy_addon, scene, tmp_path, capfd):
+    """Two copies of the photographed model: their distances are equal, the confidence 0 and a near tie is
+    warned; the panel says so."""
+    bpy = bpy_addon
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    V, F = ellipsoid()
+    write_binary(lib / "ellipsoid.stl", V, F)
+    write_binary(lib / "ellipsoid_copy.stl", V, F)
+    write_obj(lib / "torus.obj", *torus(50.0, 16.0, 40, 14))
+    me = bpy.data.meshes.new("query")
+    me.from_pydata(V.tolist(), [], F.tolist())
+    q = bpy.data.objects.new("query", me)
+    bpy.context.scene.collection.objects.link(q)
+    photo = render_object(bpy, q, tmp_path / "photo.png")
+    reports(capfd)
+    assert bpy.ops.bolus.retrieve(filepath=photo, directory=str(lib), count=3) == {"FINISHED"}
+    out = reports(capfd)
+    found = json.loads(bpy.context.scene["bolus_retrieval"])
+    assert {found[0]["model"], found[1]["model"]} == {"ellipsoid.stl", "ellipsoid_copy.stl"}
+    assert "near tie: the photo hardly tells" in out
+    info = json.loads(bpy.context.scene["bolus_retrieval_info"])
+    assert info["tie"] and info["confidence"] == 0.0
+    labels = [t for kind, t in draw_panel(bpy) if kind == "label"]
+    assert "Near tie: look at both before choosing" in labels
