@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import BolusError
 
-__all__ = ["CT_IMAGE", "RT_STRUCT", "CTVolume", "DicomFolder", "scan_folder", "read_ct", "read_folder"]
+__all__ = ["CT_IMAGE", "RT_STRUCT", "CTVolume", "DicomFolder", "scan_folder", "choose_series", "read_ct", "read_folder"]
 
 CT_IMAGE = "1.2.840.10008.5.1.4.1.1.2"
 RT_STRUCT = "1.2.840.10008.5.1.4.1.1.481.3"
@@ -128,7 +128,7 @@ def _orientation(ds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return row, col, n / np.linalg.norm(n)
 
 
-def _choose_series(found: DicomFolder, warnings: list) -> tuple[str, list]:
+def choose_series(found: DicomFolder, warnings: list) -> tuple[str, list]:
     if not found.ct_series:
         extra = f" ({found.ignored} other file(s) ignored)" if found.ignored else ""
         raise BolusError(f"no CT images (CT Image Storage) in '{found.directory}'{extra}: choose the folder of "
@@ -160,6 +160,23 @@ def _pixels(ds, path: str) -> np.ndarray:
     return out
 
 
+def _permute(a: np.ndarray, order: np.ndarray) -> None:
+    """a[i] = a[order[i]] for all i, in place (one slice of extra memory)."""
+    done = np.zeros(len(order), dtype=bool)
+    for s in range(len(order)):
+        if done[s]:
+            continue
+        tmp, i = a[s].copy(), s
+        while True:
+            done[i] = True
+            j = int(order[i])
+            if j == s:
+                a[i] = tmp
+                break
+            a[i] = a[j]
+            i = j
+
+
 def _spacing_warnings(pos: np.ndarray, warnings: list) -> None:
     if len(pos) < 2:
         return
@@ -178,8 +195,10 @@ def _spacing_warnings(pos: np.ndarray, warnings: list) -> None:
                         "slice is used at its own position")
 
 
-def read_ct(paths: list, directory: str = "", warnings: list | None = None, progress=None) -> CTVolume:
-    """The CT volume of one series' files, sorted along the slice normal."""
+def read_ct(paths: list, directory: str = "", warnings: list | None = None, progress=None,
+            pixels: bool = True) -> CTVolume:
+    """The CT volume of one series' files, sorted along the slice normal (``pixels=False``: the
+    geometry and identifiers only, ``hu`` empty (0, rows, cols))."""
     import pydicom
 
     warnings = [] if warnings is None else warnings
@@ -195,20 +214,22 @@ def read_ct(paths: list, directory: str = "", warnings: list | None = None, prog
         raise BolusError("the CT's row and column directions are not perpendicular (Image Orientation Patient)")
     if abs(abs(n[2]) - 1.0) > 1e-4:
         warnings.append("the CT is oblique (its slices are not axial): it is read in its own orientation")
-    hu = np.empty((len(paths), rows, cols), dtype=np.float32)
+    hu = np.empty((len(paths) if pixels else 0, rows, cols), dtype=np.float32)
     pos, sops, ipps = np.empty(len(paths)), [], np.empty((len(paths), 3))
     for i, path in enumerate(paths):
-        ds = pydicom.dcmread(path)
+        ds = pydicom.dcmread(path, stop_before_pixels=not pixels)
         if (int(ds.Rows), int(ds.Columns)) != (rows, cols):
             raise BolusError("the CT slices differ in size: not one series")
         ipps[i] = [float(x) for x in ds.ImagePositionPatient]
         pos[i] = float(ipps[i] @ n)
         sops.append(str(ds.SOPInstanceUID))
-        hu[i] = _pixels(ds, path)
+        if pixels:
+            hu[i] = _pixels(ds, path)
         if progress is not None and i % 16 == 0:
             progress(0.9 * (i + 1) / len(paths), "reading the CT slices")
     order = np.argsort(pos, kind="stable")
-    hu = hu[order] if np.any(order != np.arange(len(order))) else hu
+    if pixels:
+        _permute(hu, order)
     pos, ipps, sops = pos[order], ipps[order], [sops[i] for i in order]
     _spacing_warnings(pos, warnings)
     header = pydicom.dcmread(paths[int(order[0])], stop_before_pixels=True)
@@ -220,12 +241,12 @@ def read_ct(paths: list, directory: str = "", warnings: list | None = None, prog
                     warnings=warnings)
 
 
-def read_folder(directory: str, progress=None) -> tuple[CTVolume, DicomFolder]:
+def read_folder(directory: str, progress=None, pixels: bool = True) -> tuple[CTVolume, DicomFolder]:
     """The folder's CT (`read_ct` of the larger series) and what `scan_folder` found; the
     warnings (ignored files, series left out, gaps) are in the volume's ``warnings``."""
     found = scan_folder(directory)
     warnings = []
     if found.ignored:
         warnings.append(f"{found.ignored} file(s) in the folder are neither CT images nor structure sets: ignored")
-    _, paths = _choose_series(found, warnings)
-    return read_ct(paths, directory, warnings, progress), found
+    _, paths = choose_series(found, warnings)
+    return read_ct(paths, directory, warnings, progress, pixels), found
