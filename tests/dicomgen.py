@@ -80,12 +80,19 @@ def torso_lungs(P: np.ndarray) -> np.ndarray:
     return np.minimum(np.hypot((np.abs(x) - 70.0) / 50.0, y / 70.0) - 1.0, 0.0) < 0
 
 
-def couch_sdf(top: float, thickness: float = 20.0, half_width: float = 250.0):
+def couch_sdf(top: float, thickness: float = 3.0, half_width: float = 250.0):
     """A slab under the body (LPS: posterior is +y): from y = top to top + thickness."""
     def sdf(P):
         y, x = P[..., 1], P[..., 0]
         return np.maximum(np.maximum(top - y, y - top - thickness), np.abs(x) - half_width)
     return sdf
+
+
+def couch_layers(top: float, half_width: float = 250.0) -> list:
+    """[(sdf, HU)] of a couch as planning CTs show it: a 3 mm carbon plate at y = top, 30 mm of
+    foam (below the skin threshold), a 3 mm bottom plate; put before the body's layers."""
+    return [(couch_sdf(top, 36.0, half_width), -850.0), (couch_sdf(top, 3.0, half_width), COUCH),
+            (couch_sdf(top + 33.0, 3.0, half_width), COUCH)]
 
 
 def write_series(directory: str, grid: Grid, hu_of_slice, patient_id: str = "BOLUS-TEST", study_uid=None,

@@ -1,8 +1,9 @@
 """The skin from a CT volume: the outer iso-surface of the largest body at a HU threshold.
 
-1. mask = HU > threshold, then an in-plane opening of radius `OPEN_MM` breaks thin bridges
-   (a couch or mask touching the body), the largest 6-connected component is kept and grown
-   back by the same radius inside the mask (the couch and immobilisation are left out);
+1. mask = HU > threshold; eroded in-plane by `OPEN_MM`, which breaks thin contacts (a couch or
+   mask touching the body); its largest 6-connected component is grown back by as much inside
+   the mask, and the pieces this cut off that touch it and are small against it (an ear's rim)
+   are given back: the couch and immobilisation are left out;
 2. holes are filled slice by slice (lungs, airways, also where they open to the nose above);
 3. marching cubes (libigl, `core.solid.marching`) on HU - threshold cropped to the body's box
    and masked to the body (elsewhere negative, cavities positive), so the surface has the
@@ -20,10 +21,12 @@ from ..errors import BolusError
 from ..solid.marching import marching_cubes
 from .series import CTVolume
 
-__all__ = ["OPEN_MM", "TAUBIN_STEPS", "body_mask", "skin_from_ct", "mesh_field", "taubin", "signed_volume"]
+__all__ = ["OPEN_MM", "KEEP_FRACTION", "TAUBIN_STEPS", "body_mask", "skin_from_ct", "mesh_field", "taubin", "signed_volume"]
 
 #: radius (mm) of the in-plane opening that breaks a couch's thin contact with the body
 OPEN_MM = 3.0
+#: a piece cut off by the opening is given back when smaller than this fraction of the body
+KEEP_FRACTION = 0.02
 #: Taubin lambda/mu pairs: enough to take out a voxel's staircase, too few to move the skin
 TAUBIN_STEPS = 3
 
@@ -53,19 +56,36 @@ def body_mask(hu: np.ndarray, threshold: float, spacing, progress=None) -> np.nd
     mask = hu > threshold
     if not mask.any():
         raise BolusError(f"no voxel of the CT is above {threshold:g} HU: lower the threshold")
-    r = (int(OPEN_MM / spacing[0]), int(OPEN_MM / spacing[1]))
-    opened = _box(_box(mask, r, False), r, True)
+    r = (max(int(OPEN_MM / spacing[0]), 1), max(int(OPEN_MM / spacing[1]), 1))
+    core = _largest(_box(mask, r, False))  # eroded: thin contacts with a couch are broken
     if progress is not None:
         progress(0.3, "separating the body from the couch")
-    body = _largest(opened if opened.any() else mask)
-    del opened
-    body = _largest(_box(body, r, True) & mask)
+    if not core.any():  # the body is thinner than the opening: no couch step
+        body = _largest(mask)
+    else:
+        body = _box(core, r, True) & mask  # the opening of the body alone
+        del core
+        body = _regrow_small(mask, body)
     if progress is not None:
         progress(0.5, "filling the cavities")
     for k in range(body.shape[0]):
         if body[k].any():
             body[k] = ndimage.binary_fill_holes(body[k])
     return body
+
+
+def _regrow_small(mask: np.ndarray, body: np.ndarray) -> np.ndarray:
+    """``body`` plus the pieces of ``mask`` the opening cut off that touch it and are smaller than
+    `KEEP_FRACTION` of it (an ear's rim, a finger): a couch or a mask plate is far larger."""
+    rest = mask & ~body
+    lab, n = ndimage.label(rest)
+    if n:
+        sizes = np.bincount(lab.ravel(), minlength=n + 1)
+        touching = np.unique(lab[_box(body, (1, 1), True) & rest])
+        keep = touching[(touching > 0) & (sizes[touching] < KEEP_FRACTION * body.sum())]
+        if len(keep):
+            body |= np.isin(lab, keep)
+    return _largest(body)
 
 
 def mesh_field(field: np.ndarray, vol: CTVolume, offset) -> tuple[np.ndarray, np.ndarray]:
