@@ -2,7 +2,7 @@
 
 Nothing of the exporter is used: the CT's slice planes are read here with pydicom, contours
 are filled even-odd by a point-in-polygon ray test written here (not a scanline fill), and the
-solid's own sections are pixel centres tested against the mesh by libigl's winding number.
+solid's own sections are pixel centres tested against the mesh by libigl's (exact) winding number.
 The measures are SPEC's: points on their slice's plane (0.01 mm), references to existing
 slices, the frame, RT ROI Interpreted Type, the ROI volume (contour areas x slice spacing)
 against the solid's volume inside the CT's range, and Dice on the slice planes.
@@ -42,12 +42,14 @@ def inside_even_odd(polys: list, pts: np.ndarray) -> np.ndarray:
     inside = np.zeros(len(pts), dtype=bool)
     x, y = pts[:, 0], pts[:, 1]
     for P in polys:
-        odd = np.zeros(len(pts), dtype=bool)
+        box = np.flatnonzero((x >= P[:, 0].min()) & (x <= P[:, 0].max()) & (y >= P[:, 1].min()) & (y <= P[:, 1].max()))
+        xb, yb = x[box], y[box]
+        odd = np.zeros(len(box), dtype=bool)
         for a, b in zip(P, np.roll(P, -1, axis=0)):
-            cond = (a[1] > y) != (b[1] > y)
-            xc = a[0] + (y - a[1]) * (b[0] - a[0]) / ((b[1] - a[1]) or 1e-300)
-            odd ^= cond & (x < xc)
-        inside ^= odd
+            cond = (a[1] > yb) != (b[1] > yb)
+            xc = a[0] + (yb - a[1]) * (b[0] - a[0]) / ((b[1] - a[1]) or 1e-300)
+            odd ^= cond & (xb < xc)
+        inside[box] ^= odd
     return inside
 
 
@@ -55,9 +57,10 @@ def shoelace(P: np.ndarray) -> float:
     return 0.5 * abs(float(np.dot(P[:, 0], np.roll(P[:, 1], -1)) - np.dot(P[:, 1], np.roll(P[:, 0], -1))))
 
 
-def check_rtstruct(rs_path: str, ct_dir: str, roi_name: str, V=None, F=None, pixel_mm: float = 0.25) -> dict:
+def check_rtstruct(rs_path: str, ct_dir: str, roi_name: str, V=None, F=None, pixel_mm: float = 0.25,
+                   every: int = 1) -> dict:
     """Measures of ROI ``roi_name`` of ``rs_path`` on the CT of ``ct_dir``; with the solid V, F
-    also its volume error and Dice (aggregated over slices)."""
+    also its volume error and Dice (aggregated over every ``every``-th slice)."""
     import pydicom
 
     ct = read_ct_planes(ct_dir)
@@ -86,11 +89,11 @@ def check_rtstruct(rs_path: str, ct_dir: str, roi_name: str, V=None, F=None, pix
         out["plane_err"] = max(out["plane_err"], float(np.abs((P - p0) @ n).max()))
         by_slice.setdefault(sop, []).append(np.column_stack([(P - p0) @ row, (P - p0) @ col]))
     if V is not None:
-        out.update(_against_solid(ct, by_slice, V, F, pixel_mm))
+        out.update(_against_solid(ct, by_slice, V, F, pixel_mm, every))
     return out
 
 
-def _against_solid(ct: dict, by_slice: dict, V, F, pixel_mm: float) -> dict:
+def _against_solid(ct: dict, by_slice: dict, V, F, pixel_mm: float, every: int) -> dict:
     import igl
     import manifold3d as m3
 
@@ -106,7 +109,8 @@ def _against_solid(ct: dict, by_slice: dict, V, F, pixel_mm: float) -> dict:
     vol = M.trim_by_plane(list(n), float(lo)).trim_by_plane(list(-n), float(-hi)).volume()
     inter = a_sum = b_sum = 0
     Vd, Fd = np.asarray(V, dtype=np.float64), np.asarray(F, dtype=np.int64)
-    for sop, (p0, n, row, col) in ct["planes"].items():
+    ranked = sorted(ct["planes"].items(), key=lambda kv: kv[1][0] @ kv[1][1])
+    for sop, (p0, n, row, col) in ranked[::every]:
         d = (Vd - p0) @ n
         if d.min() > 0 or d.max() < 0:
             continue
@@ -116,7 +120,7 @@ def _against_solid(ct: dict, by_slice: dict, V, F, pixel_mm: float) -> dict:
         UU, VV = np.meshgrid(gu, gv)
         pts2 = np.column_stack([UU.ravel(), VV.ravel()])
         pts3 = p0 + pts2[:, :1] * row + pts2[:, 1:] * col
-        solid = igl.fast_winding_number(Vd, Fd, np.ascontiguousarray(pts3)) > 0.5
+        solid = igl.winding_number(Vd, Fd, np.ascontiguousarray(pts3)) > 0.5
         roi = inside_even_odd(by_slice.get(sop, []), pts2)
         inter += int(np.sum(solid & roi))
         a_sum += int(solid.sum())

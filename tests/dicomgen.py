@@ -161,3 +161,72 @@ def sdf_series(directory: str, grid: Grid, sdfs, ramp: float | None = None, **kw
             hu = hu + (inside - hu) * f
         return hu
     return write_series(directory, grid, hu_of_slice, **kw)
+
+
+def write_structure_set(path: str, ids: dict, grid: Grid, rois: list, frame_uid: str | None = None) -> None:
+    """A structure set as a planning system writes one: ``rois`` [(name, interpreted type,
+    {slice k: [(p,2) in-plane polygons (mm along rows, columns)]})] on the series ``ids``."""
+    import pydicom
+    from pydicom.dataset import FileMetaDataset, Dataset
+    from pydicom.uid import ExplicitVRLittleEndian
+
+    def item(**kw):
+        d = Dataset()
+        for k, v in kw.items():
+            setattr(d, k, v)
+        return d
+
+    frame = frame_uid or ids["frame"]
+    meta = FileMetaDataset()
+    meta.MediaStorageSOPClassUID, meta.MediaStorageSOPInstanceUID = "1.2.840.10008.5.1.4.1.1.481.3", new_uid()
+    meta.TransferSyntaxUID = ExplicitVRLittleEndian
+    ds = Dataset()
+    ds.file_meta = meta
+    ds.SOPClassUID, ds.SOPInstanceUID = meta.MediaStorageSOPClassUID, meta.MediaStorageSOPInstanceUID
+    ds.Modality, ds.PatientID, ds.StudyInstanceUID, ds.SeriesInstanceUID = "RTSTRUCT", "BOLUS-TEST", ids["study"], new_uid()
+    ds.FrameOfReferenceUID = frame
+    ds.StructureSetLabel = "TPS"
+    images = [item(ReferencedSOPClassUID="1.2.840.10008.5.1.4.1.1.2", ReferencedSOPInstanceUID=s)
+              for s in ids["sops"] if s]
+    ds.ReferencedFrameOfReferenceSequence = [item(FrameOfReferenceUID=frame, RTReferencedStudySequence=[item(
+        ReferencedSOPClassUID="1.2.840.10008.3.1.2.3.1", ReferencedSOPInstanceUID=ids["study"],
+        RTReferencedSeriesSequence=[item(SeriesInstanceUID=ids["series"], ContourImageSequence=images)])])]
+    ss, rc, obs = [], [], []
+    for i, (name, kind, polys) in enumerate(rois, start=1):
+        ss.append(item(ROINumber=i, ReferencedFrameOfReferenceUID=frame, ROIName=name, ROIGenerationAlgorithm="MANUAL"))
+        contours = []
+        for k, plist in sorted(polys.items()):
+            for P in plist:
+                X = grid.ipp(k) + P[:, :1] * grid.row_cos + P[:, 1:2] * grid.col_cos
+                contours.append(item(ContourGeometricType="CLOSED_PLANAR", NumberOfContourPoints=len(P),
+                                     ContourData=[f"{v:.4f}" for v in X.ravel()],
+                                     ContourImageSequence=[item(ReferencedSOPClassUID="1.2.840.10008.5.1.4.1.1.2",
+                                                                ReferencedSOPInstanceUID=ids["sops"][k])]))
+        rc.append(item(ReferencedROINumber=i, ROIDisplayColor=[255, 0, 0], ContourSequence=contours))
+        obs.append(item(ObservationNumber=i, ReferencedROINumber=i, RTROIInterpretedType=kind, ROIInterpreter=""))
+    ds.StructureSetROISequence, ds.ROIContourSequence, ds.RTROIObservationsSequence = ss, rc, obs
+    ds.save_as(path, enforce_file_format=True)
+
+
+def circle(cx: float, cy: float, r: float, n: int = 72) -> np.ndarray:
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([cx + r * np.cos(t), cy + r * np.sin(t)])
+
+
+def manifold_arrays(M):
+    """(V (n,3) float64, F (m,3) int64) of a manifold3d Manifold."""
+    mesh = M.to_mesh()
+    return np.asarray(mesh.vert_properties)[:, :3].astype(np.float64), np.asarray(mesh.tri_verts).astype(np.int64)
+
+
+def chest_bolus(a: float = 150.0, b: float = 100.0, thickness: float = 10.0, z0: float = -90.0, z1: float = 90.0,
+                width: float = 220.0, segments: int = 256):
+    """A 10 mm chest-like bolus (V, F, LPS mm): the anterior part (y < -30 mm) of an elliptic
+    wall between the ellipses (a, b) and (a + t, b + t), z0 <= z <= z1, at most ``width`` wide."""
+    import manifold3d as m3
+
+    def ell(ea, eb):
+        return m3.Manifold.cylinder(z1 - z0, 1.0, 1.0, segments).scale([ea, eb, 1.0]).translate([0, 0, z0])
+    wall = ell(a + thickness, b + thickness) - ell(a, b).scale([1, 1, 1.2]).translate([0, 0, -0.1 * (z1 - z0)])
+    box = m3.Manifold.cube([width, 200.0, z1 - z0]).translate([-width / 2, -230.0, z0])
+    return manifold_arrays(wall ^ box)
