@@ -115,8 +115,9 @@ def _against_solid(ct: dict, by_slice: dict, V, F, pixel_mm: float, every: int) 
         if d.min() > 0 or d.max() < 0:
             continue
         u, v = (Vd - p0) @ row, (Vd - p0) @ col
-        gu = np.arange(u.min() - 1, u.max() + 1, pixel_mm)
-        gv = np.arange(v.min() - 1, v.max() + 1, pixel_mm)
+        # offset by an odd fraction of a pixel: no point exactly on a flat face of the solid
+        gu = np.arange(u.min() - 1, u.max() + 1, pixel_mm) + 0.3183 * pixel_mm
+        gv = np.arange(v.min() - 1, v.max() + 1, pixel_mm) + 0.2718 * pixel_mm
         UU, VV = np.meshgrid(gu, gv)
         pts2 = np.column_stack([UU.ravel(), VV.ravel()])
         pts3 = p0 + pts2[:, :1] * row + pts2[:, 1:] * col

@@ -225,8 +225,8 @@ def chest_bolus(a: float = 150.0, b: float = 100.0, thickness: float = 10.0, z0:
     wall between the ellipses (a, b) and (a + t, b + t), z0 <= z <= z1, at most ``width`` wide."""
     import manifold3d as m3
 
-    def ell(ea, eb):
-        return m3.Manifold.cylinder(z1 - z0, 1.0, 1.0, segments).scale([ea, eb, 1.0]).translate([0, 0, z0])
-    wall = ell(a + thickness, b + thickness) - ell(a, b).scale([1, 1, 1.2]).translate([0, 0, -0.1 * (z1 - z0)])
+    def ell(ea, eb, lo, hi):
+        return m3.Manifold.cylinder(hi - lo, 1.0, 1.0, segments).scale([ea, eb, 1.0]).translate([0, 0, lo])
+    wall = ell(a + thickness, b + thickness, z0, z1) - ell(a, b, z0 - 10.0, z1 + 10.0)
     box = m3.Manifold.cube([width, 200.0, z1 - z0]).translate([-width / 2, -230.0, z0])
     return manifold_arrays(wall ^ box)
