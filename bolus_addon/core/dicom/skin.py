@@ -42,17 +42,30 @@ def _box(mask: np.ndarray, radius_px, grow: bool) -> np.ndarray:
     return out.view(bool)
 
 
+def _sizes(lab: np.ndarray, n: int) -> np.ndarray:
+    """(n+1,) approximate voxel counts of the labels (every other voxel along each axis, x 8):
+    enough to tell a body from a couch, without an int64 copy of the whole label array."""
+    sizes = np.bincount(lab[::2, ::2, ::2].ravel(), minlength=n + 1) * 8
+    sizes[0] = 0
+    return sizes
+
+
 def _largest(mask: np.ndarray) -> np.ndarray:
     lab, n = ndimage.label(mask)
     if n == 0:
         return np.zeros_like(mask)
-    sizes = np.bincount(lab.ravel())
-    sizes[0] = 0
+    if n == 1:
+        return lab.astype(bool)
+    sizes = _sizes(lab, n)
+    if not sizes.any():  # every piece missed by the sampling: count them all
+        sizes = np.bincount(lab.ravel(), minlength=n + 1)
+        sizes[0] = 0
     return lab == int(np.argmax(sizes))
 
 
-def body_mask(hu: np.ndarray, threshold: float, spacing, progress=None) -> np.ndarray:
-    """(k, rows, cols) bool: the largest body above ``threshold`` HU, its cavities filled."""
+def body_mask(hu: np.ndarray, threshold: float, spacing, progress=None):
+    """The largest body above ``threshold`` HU, its cavities filled: (bool (k', r', c') cropped
+    to its bounding box, lower corner (3,) of the box in voxels)."""
     mask = hu > threshold
     if not mask.any():
         raise BolusError(f"no voxel of the CT is above {threshold:g} HU: lower the threshold")
@@ -66,12 +79,28 @@ def body_mask(hu: np.ndarray, threshold: float, spacing, progress=None) -> np.nd
         body = _box(core, r, True) & mask  # the opening of the body alone
         del core
         body = _regrow_small(mask, body)
+    del mask
+    idx = [np.flatnonzero(body.any(axis=tuple(a for a in range(3) if a != ax))) for ax in range(3)]
+    lo = np.array([i[0] for i in idx])
+    box = tuple(slice(i[0], i[-1] + 1) for i in idx)
     if progress is not None:
         progress(0.5, "filling the cavities")
-    for k in range(body.shape[0]):
-        if body[k].any():
-            body[k] = ndimage.binary_fill_holes(body[k])
-    return body
+    return _fill_slices(np.ascontiguousarray(body[box])), lo
+
+
+def _fill_slices(body: np.ndarray) -> np.ndarray:
+    """Holes filled slice by slice: the background pieces (in-plane connectivity) that do not
+    reach a slice's border are cavities (lungs, airways, also where they open to the nose above)."""
+    plane = np.zeros((3, 3, 3), dtype=bool)
+    plane[1] = ndimage.generate_binary_structure(2, 1)
+    lab, n = ndimage.label(~body, structure=plane)
+    outside = np.zeros(n + 1, dtype=bool)
+    for edge in (lab[:, 0, :], lab[:, -1, :], lab[:, :, 0], lab[:, :, -1]):
+        outside[np.unique(edge)] = True
+    outside[0] = True  # label 0: the body itself
+    keep = ~outside
+    keep[0] = True
+    return keep[lab]
 
 
 def _regrow_small(mask: np.ndarray, body: np.ndarray) -> np.ndarray:
@@ -80,12 +109,14 @@ def _regrow_small(mask: np.ndarray, body: np.ndarray) -> np.ndarray:
     rest = mask & ~body
     lab, n = ndimage.label(rest)
     if n:
-        sizes = np.bincount(lab.ravel(), minlength=n + 1)
+        sizes = _sizes(lab, n)
         touching = np.unique(lab[_box(body, (1, 1), True) & rest])
-        keep = touching[(touching > 0) & (sizes[touching] < KEEP_FRACTION * body.sum())]
+        keep = touching[(touching > 0) & (sizes[touching] < KEEP_FRACTION * 8 * body[::2, ::2, ::2].sum())]
         if len(keep):
-            body |= np.isin(lab, keep)
-    return _largest(body)
+            table = np.zeros(n + 1, dtype=bool)
+            table[keep] = True
+            body |= table[lab]
+    return body
 
 
 def mesh_field(field: np.ndarray, vol: CTVolume, offset) -> tuple[np.ndarray, np.ndarray]:
@@ -103,17 +134,13 @@ def mesh_field(field: np.ndarray, vol: CTVolume, offset) -> tuple[np.ndarray, np
 def skin_from_ct(vol: CTVolume, threshold: float = -350.0, progress=None,
                  smooth_steps: int = TAUBIN_STEPS) -> tuple[np.ndarray, np.ndarray]:
     """The skin of ``vol`` at ``threshold`` HU: (V (n,3) LPS mm, F (m,3) int64), closed, outward."""
-    body = body_mask(vol.hu, threshold, vol.spacing, progress)
-    idx = [np.flatnonzero(body.any(axis=tuple(a for a in range(3) if a != ax))) for ax in range(3)]
-    lo = np.array([i[0] for i in idx])
-    hi = np.array([i[-1] + 1 for i in idx])
-    box = tuple(slice(a, b) for a, b in zip(lo, hi))
-    sub = body[box]
+    sub, lo = body_mask(vol.hu, threshold, vol.spacing, progress)
+    box = tuple(slice(a, a + n) for a, n in zip(lo, sub.shape))
     field = vol.hu[box] - np.float32(threshold)
     # outside the body (couch, other parts): at most just below the threshold; inside: at least above
     np.minimum(field, -1.0, out=field, where=~sub)
     np.maximum(field, 1.0, out=field, where=sub & (field <= 0))
-    del sub, body
+    del sub
     if progress is not None:
         progress(0.7, "marching cubes")
     V, F = mesh_field(field, vol, lo)
