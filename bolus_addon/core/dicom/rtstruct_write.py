@@ -68,7 +68,7 @@ def _roi_contour(vol: CTVolume, number: int, sections: list, colour) -> object:
 
 
 def _observation(number: int, obs: int, name: str, density: float):
-    o = _item(ObservationNumber=obs, ReferencedROINumber=number, ROIObservationLabel=name[:64],
+    o = _item(ObservationNumber=obs, ReferencedROINumber=number, ROIObservationLabel=name[:16],
               RTROIInterpretedType="BOLUS", ROIInterpreter="")
     if density > 0:
         o.ROIPhysicalPropertiesSequence = [_item(ROIPhysicalProperty="REL_ELEC_DENSITY",
