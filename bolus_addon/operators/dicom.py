@@ -82,6 +82,10 @@ class BOLUS_OT_import_dicom(BolusOperator, bpy.types.Operator):
         V = skin.V / job["mm"]
         corners = np.ascontiguousarray(skin.F, dtype=np.int32).ravel()
         me = mesh_io.new_mesh(name, V, corners, np.arange(0, len(corners), 3, dtype=np.int32))
+        for layer in (".select_vert", ".select_edge", ".select_poly"):  # nothing selected: no region yet
+            attr = me.attributes.get(layer)
+            if attr is not None:
+                me.attributes.remove(attr)
         obj = bpy.data.objects.new(name, me)
         context.collection.objects.link(obj)
         for o in context.view_layer.objects:
