@@ -231,6 +231,9 @@ ax = np.arange(-6.0, 6.5, 0.5)
 X, Y, Z = np.meshgrid(ax, ax, ax, indexing="ij")
 ball = marching.marching_manifold(4.0 - np.sqrt(X ** 2 + Y ** 2 + Z ** 2), [-6.0] * 3, [0.5] * 3)
 out["marched_ball"] = [ball.genus(), round(ball.volume() / (4 / 3 * np.pi * 64), 3)]
+rtw = importlib.import_module("bl_ext.user_default.bolus.bolus_addon.core.dicom.rtstruct_write")
+out["dicom_uid"] = rtw.new_uid()[:5]  # the DICOM code imports pydicom from the zip's wheel
+import pydicom  # noqa: F401
 out["modules"] = {m: getattr(sys.modules.get(m), "__file__", None)
                   for m in ("scipy", "sklearn", "manifold3d", "igl", "ezdxf", "fpdf", "pydicom")}
 print("RESULT " + json.dumps(out))
@@ -319,7 +322,7 @@ def check_zip(zip_path: Path, pythons: list[str]) -> int:
             else:
                 print(f"  ok {zip_path.name} in bpy {res['bpy']} (Python {res['python']}, numpy {res['numpy']}): "
                       f"segment and unfold finished, EL {res['EL']:.4f}, SVG/DXF/PDF written, scipy, scikit-learn, "
-                      "manifold3d, libigl, ezdxf and fpdf2 from the zip's wheels")
+                      "manifold3d, libigl, ezdxf, fpdf2 and pydicom from the zip's wheels")
             failed += bool(bad)
     return int(failed > 0)
 
