@@ -52,16 +52,31 @@ def ramp_hu(d: np.ndarray, ramp: float, inside: float = TISSUE, outside: float =
     return outside + (inside - outside) * np.clip(0.5 - d / ramp, 0.0, 1.0)
 
 
-def mesh_sdf(V, F):
-    """A signed-distance function (points (n,3) -> (n,) mm, negative inside) of a closed mesh."""
+def mesh_sdf(V, F, band: float | None = None):
+    """A signed-distance function (points (..., 3) -> (...) mm, negative inside) of a closed mesh.
+    ``band``: on a slice of points (rows, cols, 3), distances are searched only within the band
+    (libigl stops early); every region of the slice beyond it takes the sign of its first point's
+    winding number, its value +-band: enough for a partial-volume ramp narrower than the band."""
     import igl
+    from scipy import ndimage
 
     V = np.ascontiguousarray(V, dtype=np.float64)
     F = np.ascontiguousarray(F, dtype=np.int64)
 
     def sdf(P):
-        res = igl.signed_distance(np.ascontiguousarray(P.reshape(-1, 3)), V, F)
-        return np.asarray(res[0]).reshape(P.shape[:-1])
+        Q = np.ascontiguousarray(P.reshape(-1, 3))
+        if band is None or P.ndim != 3:
+            return np.asarray(igl.signed_distance(Q, V, F)[0]).reshape(P.shape[:-1])
+        d = np.asarray(igl.signed_distance(Q, V, F, igl.SignedDistanceType.SIGNED_DISTANCE_TYPE_PSEUDONORMAL,
+                                           -band, band)[0]).reshape(P.shape[:-1])
+        far = ~(np.abs(d) < 0.999 * band)  # NaN or the bound: not searched
+        lab, n = ndimage.label(far)
+        if n:
+            first = ndimage.minimum_position(np.arange(lab.size).reshape(lab.shape), lab, np.arange(1, n + 1))
+            reps = np.array([P[i, j] for i, j in first])
+            inside = igl.winding_number(V, F, np.ascontiguousarray(reps)) > 0.5
+            d[far] = np.where(np.concatenate([[False], inside])[lab[far]], -band, band)
+        return d
     return sdf
 
 

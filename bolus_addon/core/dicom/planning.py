@@ -76,7 +76,8 @@ def import_skin(directory: str, source: str = "AUTO", threshold_hu: float = -350
     want_rt = source == "RTSTRUCT" or (source == "AUTO" and (found.rtstruct or roi_name))
     if source == "RTSTRUCT" and not found.rtstruct:
         raise BolusError(f"no structure set (RTSTRUCT) in '{directory}': import the skin from the CT instead")
-    vol = read_ct(paths, directory, warnings, progress if not want_rt else None, pixels=not want_rt)
+    reading = _part(progress, 0.0, 0.4)
+    vol = read_ct(paths, directory, warnings, reading if not want_rt else None, pixels=not want_rt)
     chosen = None
     if want_rt:
         for ss in _structure_sets(found.rtstruct, vol.frame_uid, warnings, strict=True):
@@ -93,8 +94,8 @@ def import_skin(directory: str, source: str = "AUTO", threshold_hu: float = -350
         src, name = "RTSTRUCT", roi.name
     else:
         if want_rt:  # AUTO without an External ROI: the CT after all
-            vol = read_ct(paths, directory, [], progress, pixels=True)
-        V, F = skin_from_ct(vol, threshold_hu, progress)
+            vol = read_ct(paths, directory, [], reading, pixels=True)
+        V, F = skin_from_ct(vol, threshold_hu, _part(progress, 0.4, 1.0))
         src, name = "CT", ""
     return ImportedSkin(V=V, F=F, source=src, roi_name=name, frame_uid=vol.frame_uid, study_uid=vol.study_uid,
                         series_uid=vol.series_uid, patient_id=vol.patient_id, directory=directory,
@@ -120,6 +121,13 @@ def export_rtstruct(path: str, ct_directory: str, solids: list, rel_electron_den
     out = write_rtstruct(path, vol, solids, rel_electron_density, existing, progress)
     out.update(existing=carried, warnings=warnings, summary=ct_summary(vol))
     return out
+
+
+def _part(progress, lo: float, hi: float):
+    """``progress`` for a part of the job: its fractions 0..1 mapped to lo..hi (None stays None)."""
+    if progress is None:
+        return None
+    return lambda f, text="": progress(lo + (hi - lo) * float(f), text)
 
 
 def _without(ds, names: set):
