@@ -24,6 +24,8 @@ from ..blender.objects import (
     PROP_DICOM_PATIENT,
     PROP_DICOM_SERIES,
     PROP_DICOM_STUDY,
+    PROP_PART_INDEX,
+    PROP_SOURCE,
     dicom_source,
 )
 from ..blender.operator_base import BolusOperator
@@ -148,7 +150,10 @@ class BOLUS_OT_export_rtstruct(BolusOperator, bpy.types.Operator):
             path += ".dcm"
         objs = _selected_solids(context)
         solids, frames, ct_dir = [], set(), bpy.path.abspath(self.ct_directory) if self.ct_directory else ""
-        for i, obj in enumerate(objs):
+        for obj in objs:
+            if PROP_PART_INDEX in obj:
+                raise BolusError(f"'{obj.name}' is a print part turned onto the build plate: select the bolus "
+                                 f"'{obj.get(PROP_SOURCE, '?')}' (its split parts stay in place there)")
             src = dicom_source(obj)
             if src is None and not ct_dir:
                 raise BolusError(f"'{obj.name}' has no DICOM frame (its skin was not imported from a planning CT): "

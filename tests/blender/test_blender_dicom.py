@@ -89,6 +89,19 @@ def test_make_shell_bolus_carries_the_frame_and_goes_back(bpy_addon, scene, tmp_
     m = check_rtstruct(path, str(tmp_path / "ct"), "Bolus 4mm", Vb, Fb)
     assert m["plane_err"] <= 0.01 and m["refs_ok"] and m["frame_ok"] and m["dice"] >= 0.99
     assert m["volume_rel_err"] <= 0.01
+    # split into print parts (held in place in the bolus's mesh): the sections are their union
+    assert bpy.ops.bolus.print_segment(parts=2) == {"FINISHED"}
+    assert bpy.ops.bolus.export_rtstruct(filepath=path, roi_name="Bolus 4mm") == {"FINISHED"}
+    m = check_rtstruct(path, str(tmp_path / "ct"), "Bolus 4mm", Vb, Fb)
+    assert m["plane_err"] <= 0.01 and m["dice"] >= 0.98 and m["volume_rel_err"] <= 0.02
+    assert bpy.ops.bolus.orient_parts() == {"FINISHED"}
+    part = next(o for o in bpy.data.objects if o.name.startswith(bolus.name + "_part_"))
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o is part)
+    bpy.context.view_layer.objects.active = part
+    with pytest.raises(RuntimeError, match="print part turned onto the build plate"):
+        bpy.ops.bolus.export_rtstruct(filepath=str(tmp_path / "part.dcm"))
+    assert not (tmp_path / "part.dcm").exists()
 
 
 def test_bad_input_is_refused_with_a_message_and_nothing_added_or_written(bpy_addon, scene, tmp_path):
