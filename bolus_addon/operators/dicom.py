@@ -41,7 +41,7 @@ SOURCE_ITEMS = [
 
 
 class BOLUS_OT_import_dicom(BolusOperator, bpy.types.Operator):
-    """Import the skin from a planning CT folder (DICOM): from the CT at a HU threshold or from the structure set's External ROI, in patient coordinates (LPS, mm), with the CT's identifiers so the bolus can go back as an RTSTRUCT"""
+    """Import the skin from a planning CT folder (DICOM): from the CT at a HU threshold or from the structure set's External ROI, in patient coordinates (LPS, mm), with the CT's identifiers so the bolus can go back as an RTSTRUCT. Needs a folder of CT slices (uncompressed); makes a new object"""
 
     bl_idname = "bolus.import_dicom"
     bl_label = "Import Planning CT"
@@ -115,7 +115,7 @@ def _selected_solids(context) -> list:
 
 
 class BOLUS_OT_export_rtstruct(BolusOperator, bpy.types.Operator):
-    """Export the selected closed solids as an RTSTRUCT on the planning CT their skin came from: exact sections at every CT slice, RT ROI Interpreted Type BOLUS. Check the structure in the planning system before use"""
+    """Export the selected closed solids as an RTSTRUCT on the planning CT their skin came from: exact sections at every CT slice, RT ROI Interpreted Type BOLUS. Needs a closed solid made on a skin from Import Planning CT (or a CT folder). Check the structure in the planning system before use"""
 
     bl_idname = "bolus.export_rtstruct"
     bl_label = "Export RTSTRUCT"
