@@ -28,7 +28,8 @@ class Grid:
     cols: int = 80
     spacing: tuple = (1.25, 1.0)  #: (row spacing, column spacing) mm
     positions: np.ndarray = field(default_factory=lambda: np.arange(40) * 2.0 - 40.0)
-    origin: np.ndarray = field(default_factory=lambda: np.array([-40.0, -32.0, 0.0]))  #: in-plane origin (x, y) ...
+    #: a point of the first pixel's line along the normal (LPS mm): its in-plane part is used
+    origin: np.ndarray = field(default_factory=lambda: np.array([-40.0, -32.0, 0.0]))
     row_cos: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
     col_cos: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
 
@@ -82,17 +83,18 @@ def mesh_sdf(V, F, band: float | None = None):
 
 def torso_sdf(P: np.ndarray) -> np.ndarray:
     """Approximate signed distance (mm) of a chest-like body: an ellipse 340 x 220 mm whose size
-    swells along z, two lungs (returned separately by `torso_lungs`)."""
+    swells along z (its lungs: `torso_lungs`)."""
     x, y, z = P[..., 0], P[..., 1], P[..., 2]
     a = 170.0 + 10.0 * np.sin(z / 80.0)
     b = 110.0 + 6.0 * np.cos(z / 60.0)
     rho = np.sqrt((x / a) ** 2 + (y / b) ** 2)
-    return (rho - 1.0) * np.minimum(a, b) * (1 + 0.0 * rho)
+    return (rho - 1.0) * np.minimum(a, b)
 
 
 def torso_lungs(P: np.ndarray) -> np.ndarray:
+    """(...) bool: inside one of two elliptic lungs (100 x 140 mm, 70 mm either side)."""
     x, y = P[..., 0], P[..., 1]
-    return np.minimum(np.hypot((np.abs(x) - 70.0) / 50.0, y / 70.0) - 1.0, 0.0) < 0
+    return np.hypot((np.abs(x) - 70.0) / 50.0, y / 70.0) < 1.0
 
 
 def couch_sdf(top: float, thickness: float = 3.0, half_width: float = 250.0):
@@ -115,7 +117,6 @@ def write_series(directory: str, grid: Grid, hu_of_slice, patient_id: str = "BOL
     """Write one CT series: ``hu_of_slice(k, centres (rows, cols, 3)) -> (rows, cols) HU``.
     Instance numbers grow as z falls (slice k = positions[k] gets instance n - k).  Returns the
     identifiers {study, frame, series, sops (per k, None where skipped), paths}."""
-    import pydicom
     from pydicom.dataset import FileMetaDataset, Dataset
     from pydicom.uid import ExplicitVRLittleEndian, JPEG2000Lossless
 
@@ -181,7 +182,6 @@ def sdf_series(directory: str, grid: Grid, sdfs, ramp: float | None = None, **kw
 def write_structure_set(path: str, ids: dict, grid: Grid, rois: list, frame_uid: str | None = None) -> None:
     """A structure set as a planning system writes one: ``rois`` [(name, interpreted type,
     {slice k: [(p,2) in-plane polygons (mm along rows, columns)]})] on the series ``ids``."""
-    import pydicom
     from pydicom.dataset import FileMetaDataset, Dataset
     from pydicom.uid import ExplicitVRLittleEndian
 
