@@ -13,10 +13,10 @@ def register():
 
     from . import panel
     from .blender import properties
-    from .operators import analysis, area, cuts, improve, pattern, printing, retrieval, solid, unfold
+    from .operators import analysis, area, cuts, dicom, improve, pattern, printing, retrieval, solid, unfold
 
     global _classes
-    _classes = (properties.BolusSettings, *area.classes, *analysis.classes, *cuts.classes, *improve.classes,
+    _classes = (properties.BolusSettings, *dicom.classes, *area.classes, *analysis.classes, *cuts.classes, *improve.classes,
                 *unfold.classes, *pattern.classes, *printing.classes, *solid.classes, *retrieval.classes,
                 *panel.classes)
     for cls in _classes:

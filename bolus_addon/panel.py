@@ -1,7 +1,8 @@
 """Sidebar panel (3D View > Sidebar > Bolus): a guided walk through a case, and the Bolus menu (F3).
 
-The steps in order: 1 Select area, 2 Preview, 3 Segment, 4 Smooth cuts, 5 Improve (optional),
-6a Sheet pattern (unfold, export) or 6b Printed bolus (shell, print parts, orient, export parts).
+The steps in order: 0 Import planning CT (optional), 1 Select area, 2 Preview, 3 Segment, 4 Smooth
+cuts, 5 Improve (optional), 6a Sheet pattern (unfold, export) or 6b Printed bolus (shell, print
+parts, orient, export parts), 6c Export to planning system (RTSTRUCT).
 Each step has a number, a one-line hint, and, when its input is missing, is greyed with the
 reason as a label (the operators' poll message, `guide.reason`); the next step for the active
 object is marked with an arrow and drawn as a larger, pressed button.  The unit in use, a
@@ -13,7 +14,7 @@ from __future__ import annotations
 import bpy
 
 from .blender import guide, mesh_io, panel_tables
-from .blender.objects import bolus_for, print_source
+from .blender.objects import PROP_DICOM_DIR, PROP_DICOM_PATIENT, bolus_for, dicom_source, print_source
 from .blender.panel_layout import OP_SETTINGS, STEP_OF, Guide, set_settings, wrapped_label
 from .blender.panel_tables import size_warning
 
@@ -38,6 +39,22 @@ def draw_head(layout, g: Guide) -> None:
         wrapped_label(layout.column(align=True), f"'{g.obj.name}' is {made[0]}: the steps on the skin are "
                       f"greyed (select '{made[1]}' for them)", g.width, icon="INFO")
     wrapped_label(layout.column(align=True), "Next: " + g.next_text, g.width, icon="FORWARD")
+
+
+def draw_ct(layout, g: Guide) -> None:
+    """0: the skin from a planning CT folder (a directory browser opens)."""
+    box = g.step(layout, "ct")
+    g.button(g.gate_op(box, "bolus.import_dicom"), "bolus.import_dicom", icon="IMPORT")
+
+
+def draw_planning(layout, g: Guide) -> None:
+    """6c: the selected solid back as an RTSTRUCT on its CT (a file browser opens)."""
+    box = g.step(layout, "planning")
+    src = dicom_source(g.obj)
+    if src is not None:
+        wrapped_label(box, f"CT of patient {src.get(PROP_DICOM_PATIENT, '?')}: {src.get(PROP_DICOM_DIR, '?')}",
+                      g.width, icon="INFO")
+    g.button(g.gate_op(box, "bolus.export_rtstruct"), "bolus.export_rtstruct", icon="EXPORT")
 
 
 def draw_area(layout, g: Guide) -> None:
@@ -175,8 +192,8 @@ class VIEW3D_PT_bolus(bpy.types.Panel):
         layout = self.layout
         g = Guide(context)
         draw_head(layout, g)
-        for draw in (draw_area, draw_preview, draw_segment, draw_cuts, draw_improve, draw_sheet, draw_print,
-                     draw_library):
+        for draw in (draw_ct, draw_area, draw_preview, draw_segment, draw_cuts, draw_improve, draw_sheet, draw_print,
+                     draw_planning, draw_library):
             draw(layout, g)
 
 

@@ -2,6 +2,7 @@
 
     .venv/bin/python scripts/bolus_cli.py skin.stl --point 0 -95 20 --out case42
     blender --background --python scripts/bolus_cli.py -- skin.stl --point 0 -95 20 --out case42
+    .venv/bin/python scripts/bolus_cli.py --ct CT_FOLDER --point 0 -95 20 --steps shell,print --out case42
 
 Imports the mesh (STL, OBJ or PLY; --units says the file's unit) into a scene where 1 unit = 1 mm,
 picks the treatment area (--point X Y Z with --radius: bolus.select_area with the 3D cursor there;
@@ -19,6 +20,12 @@ mm in the file's frame) and runs the --steps in this order:
   shell    bolus.make_shell (--thickness-mm, --resolution-mm, --label): <name>_bolus
   print    bolus.print_segment (--parts, --seed, --print-method), bolus.orient_parts, bolus.export_parts on the
            bolus: parts/*.stl (binary, mm, closed)              (needs shell: added)
+  rtstruct bolus.export_rtstruct on the planning CT: RS_bolus.dcm (or --rtstruct-out) (needs shell: added;
+           added itself with --ct)
+
+With --ct DIR instead of a mesh file the skin is bolus.import_dicom of the planning CT's folder
+(patient coordinates LPS, mm: --point and --sphere are in them); report.json's input then records
+the folder, patient ID, study, CT series and frame of reference.
 
 and writes report.json, result.blend and, with --png, surface.png (the skin alone, seen along
 the treatment area's mean normal, coloured by patch), pattern.png, parts.png.  report.json holds: input
@@ -52,10 +59,10 @@ sys.path.insert(0, str(ROOT / "scripts"))
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
-STEPS = ("preview", "segment", "cuts", "improve", "unfold", "export", "shell", "print")
+STEPS = ("preview", "segment", "cuts", "improve", "unfold", "export", "shell", "print", "rtstruct")
 DEFAULT_STEPS = "preview,segment,cuts,unfold,export"
 #: a step and the earlier step it cannot do without (added when missing)
-NEEDS = {"cuts": "segment", "export": "unfold", "print": "shell"}
+NEEDS = {"cuts": "segment", "export": "unfold", "print": "shell", "rtstruct": "shell"}
 UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
 FORMATS = (".stl", ".obj", ".ply")
 #: exit code of a refusal (an operator's, or a treatment area that selects nothing) and of argparse
@@ -71,7 +78,10 @@ def parse_args(argv=None) -> argparse.Namespace:
         argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
     ap = argparse.ArgumentParser(prog="bolus_cli.py", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("stl", type=Path, help="the skin surface: .stl (binary or ASCII), .obj or .ply; only read")
+    ap.add_argument("stl", type=Path, nargs="?", help="the skin surface: .stl (binary or ASCII), .obj or .ply; "
+                                                      "only read (or --ct)")
+    ap.add_argument("--ct", type=Path, help="a planning CT's DICOM folder: the skin from it (instead of a mesh file)")
+    ap.add_argument("--rtstruct-out", type=Path, help="the RTSTRUCT to write (default OUT/RS_bolus.dcm; with --ct)")
     ap.add_argument("--units", choices=sorted(UNITS_MM), default="mm", help="the file's length unit (default mm)")
     area = ap.add_mutually_exclusive_group()
     area.add_argument("--point", type=float, nargs=3, metavar=("X", "Y", "Z"),
@@ -107,9 +117,16 @@ def parse_args(argv=None) -> argparse.Namespace:
     g.add_argument("--time-limit-s", type=float, default=60.0,
                    help="a step estimated to take longer is refused with what to do instead (default 60; 0 = no limit)")
     args = ap.parse_args(argv)
-    if not args.stl.is_file():
+    if (args.stl is None) == (args.ct is None):
+        ap.error("give the skin as a mesh file or as --ct FOLDER (one of the two)")
+    if args.ct is not None:
+        if not args.ct.is_dir():
+            ap.error(f"--ct {args.ct}: no such folder")
+        if "rtstruct" not in args.steps.split(","):
+            args.steps += ",rtstruct"
+    elif not args.stl.is_file():
         ap.error(f"{args.stl}: no such file")
-    if args.stl.suffix.lower() not in FORMATS:
+    elif args.stl.suffix.lower() not in FORMATS:
         ap.error(f"{args.stl}: a {'/'.join(FORMATS)} file is needed, got '{args.stl.suffix}'")
     if args.radius <= 0:
         ap.error(f"--radius must be positive, got {args.radius:g}")
@@ -230,8 +247,10 @@ class Run:
     def __init__(self, args: argparse.Namespace):
         self.args = args
         self.out: Path = args.out
+        source = {"ct": str(args.ct.resolve())} if args.ct is not None else \
+            {"path": str(args.stl.resolve()), "units": args.units, "sha256": sha256(args.stl)}
         self.report: dict = {
-            "input": {"path": str(args.stl.resolve()), "units": args.units, "sha256": sha256(args.stl)},
+            "input": source,
             "steps": args.plan, "steps_added": args.added, "steps_done": [],
             "area": None, "results": {}, "reports": [], "warnings": [], "seconds": {}, "step_seconds": {},
             "outputs": [],
@@ -309,6 +328,8 @@ class Run:
 
         mm_scene()
         bpy.context.scene.bolus.time_limit_s = a.time_limit_s
+        if a.ct is not None:
+            return self.load_ct()
         scale = UNITS_MM[a.units]
         path = str(a.stl.resolve())
         ext = a.stl.suffix.lower()
@@ -334,6 +355,16 @@ class Run:
         bpy.ops.object.transform_apply(location=False, rotation=True, scale=True)  # vertices in mm
         self.skin = self.surface = obj
         self.report["input"].update(object=obj.name, vertices=len(obj.data.vertices), faces=len(obj.data.polygons))
+
+    def load_ct(self) -> None:
+        """The skin from the planning CT (bolus.import_dicom): patient coordinates, mm."""
+        self.op("load", bpy.ops.bolus.import_dicom, directory=str(self.args.ct.resolve()))
+        obj = bpy.context.active_object
+        self.skin = self.surface = obj
+        ids = {k.removeprefix("bolus_dicom_"): obj[k] for k in obj.keys() if k.startswith("bolus_dicom_")}
+        self.report["input"].update(object=obj.name, vertices=len(obj.data.vertices), faces=len(obj.data.polygons),
+                                    patient_id=ids.get("patient_id"), study=ids.get("study_uid"),
+                                    series=ids.get("ct_series_uid"), frame=ids.get("frame_uid"))
 
     def select_area(self) -> None:
         a, obj = self.args, self.skin
@@ -439,6 +470,15 @@ class Run:
                   **props(self.bolus, "bolus_print_table", "bolus_orient_table", "bolus_connectors"),
                   part_figures=[{"object": p.name, **props(p)} for p in parts])
 
+    def step_rtstruct(self) -> None:
+        a = self.args
+        path = (a.rtstruct_out or self.out / "RS_bolus.dcm").resolve()
+        self.activate(self.bolus, region=False)
+        self.op("rtstruct", bpy.ops.bolus.export_rtstruct, filepath=str(path))
+        if path.is_relative_to(self.out.resolve()):
+            self.output(self.out / path.relative_to(self.out.resolve()))
+        self.done("rtstruct", file=str(path), frame=self.bolus.get("bolus_dicom_frame_uid"))
+
     def pictures(self) -> None:
         """surface.png (the skin alone, seen along the treatment area's mean normal, coloured by patch
         or flattenability), pattern.png (area distortion), parts.png (overhangs): demo.py's renderers."""
@@ -543,8 +583,8 @@ class Run:
                 self.output(self.out / "result.blend")
         except Exception as exc:
             self.report["warnings"].append(f"result.blend not written: {exc}")
-        unchanged = sha256(self.args.stl) == self.report["input"]["sha256"]
-        self.report["input"]["unchanged"] = unchanged
+        if self.args.stl is not None:
+            self.report["input"]["unchanged"] = sha256(self.args.stl) == self.report["input"]["sha256"]
         self.report["outputs"].append("report.json")
         (self.out / "report.json").write_text(json.dumps(self.report, indent=2, default=_json_default))
         print(f"bolus_cli: wrote {', '.join(self.report['outputs'])} into {self.out}")

@@ -13,8 +13,8 @@ This script
    versions pinned in requirements.txt, cp313 at those in requirements-bpy52.txt -- and
    the pure-Python packages they need (joblib, cloudpickle, threadpoolctl, narwhals, at
    the versions in the venv), and the pattern export's pure-Python wheels (py3-none-any:
-   ezdxf, fpdf2, fonttools, defusedxml, pyparsing, typing_extensions, at the versions in
-   requirements.txt; no Pillow), into a cache folder;
+   ezdxf, fpdf2, fonttools, defusedxml, pyparsing, typing_extensions, and pydicom for the DICOM
+   import and export, at the versions in requirements.txt; no Pillow), into a cache folder;
 2. stages the extension (the files the manifest's paths_exclude_pattern keeps: root __init__.py,
    LICENSE, README.md, bolus_addon/, assets/print_sae.npz)
    with those wheels, adding ``platforms`` and ``wheels`` to the staged manifest;
@@ -62,7 +62,8 @@ PURE = ("joblib", "cloudpickle", "threadpoolctl", "narwhals")
 #: py3-none-any wheels at the versions pinned in requirements.txt (ezdxf and fonttools also publish
 #: compiled wheels; their pure ones run the same, only slower on huge drawings).  Not Pillow: fpdf2
 #: draws vectors and text without it (tests/test_core_pattern_export.py checks that).
-PURE_ANY = ("ezdxf", "fpdf2", "fonttools", "defusedxml", "pyparsing", "typing_extensions")
+#: pydicom: the planning CT and the RTSTRUCT (core.dicom), pure Python too.
+PURE_ANY = ("ezdxf", "fpdf2", "fonttools", "defusedxml", "pyparsing", "typing_extensions", "pydicom")
 
 
 def pinned(name: str, requirements: str = "requirements.txt") -> str:
@@ -230,8 +231,11 @@ ax = np.arange(-6.0, 6.5, 0.5)
 X, Y, Z = np.meshgrid(ax, ax, ax, indexing="ij")
 ball = marching.marching_manifold(4.0 - np.sqrt(X ** 2 + Y ** 2 + Z ** 2), [-6.0] * 3, [0.5] * 3)
 out["marched_ball"] = [ball.genus(), round(ball.volume() / (4 / 3 * np.pi * 64), 3)]
+rtw = importlib.import_module("bl_ext.user_default.bolus.bolus_addon.core.dicom.rtstruct_write")
+out["dicom_uid"] = rtw.new_uid()[:5]  # the DICOM code imports pydicom from the zip's wheel
+import pydicom  # noqa: F401
 out["modules"] = {m: getattr(sys.modules.get(m), "__file__", None)
-                  for m in ("scipy", "sklearn", "manifold3d", "igl", "ezdxf", "fpdf")}
+                  for m in ("scipy", "sklearn", "manifold3d", "igl", "ezdxf", "fpdf", "pydicom")}
 print("RESULT " + json.dumps(out))
 """
 
@@ -239,7 +243,7 @@ print("RESULT " + json.dumps(out))
 
 #: what the extension's wheels bring; hidden from the Blender under test by `--check`
 BUNDLED_MODULES = ("scipy", "sklearn", "scikit_learn", "manifold3d", "igl", "libigl", "joblib", "threadpoolctl", "narwhals", "cloudpickle",
-                   "ezdxf", "fpdf", "fonttools", "defusedxml", "pyparsing", "typing_extensions")
+                   "ezdxf", "fpdf", "fonttools", "defusedxml", "pyparsing", "typing_extensions", "pydicom")
 
 
 def _site_without_bundled(python: str, dest: Path) -> Path:
@@ -318,7 +322,7 @@ def check_zip(zip_path: Path, pythons: list[str]) -> int:
             else:
                 print(f"  ok {zip_path.name} in bpy {res['bpy']} (Python {res['python']}, numpy {res['numpy']}): "
                       f"segment and unfold finished, EL {res['EL']:.4f}, SVG/DXF/PDF written, scipy, scikit-learn, "
-                      "manifold3d, libigl, ezdxf and fpdf2 from the zip's wheels")
+                      "manifold3d, libigl, ezdxf, fpdf2 and pydicom from the zip's wheels")
             failed += bool(bad)
     return int(failed > 0)
 

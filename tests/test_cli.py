@@ -183,3 +183,33 @@ def test_unreadable_or_empty_file_is_refused(tmp_path, content, says):
 def test_bad_argument_is_argparses_exit_2(stl, tmp_path, args, says):
     run, report = run_cli(stl, tmp_path / "bad", *args)
     assert run.returncode == 2 and says in run.stderr and report is None
+
+
+def test_ct_folder_in_rtstruct_out(tmp_path):
+    """--ct: the skin from a generated planning CT, a bolus on its front, the RTSTRUCT back on that CT."""
+    pytest.importorskip("bpy")
+    pytest.importorskip("pydicom")
+    import dicomgen as g
+    from dicomcheck import check_rtstruct
+
+    grid = g.Grid(rows=60, cols=64, spacing=(1.0, 0.8), positions=np.arange(28) * 2.0 - 27.0,
+                  origin=np.array([-25.6, -30.0, 0.0]))
+    ids = g.sdf_series(str(tmp_path / "ct"), grid, [(lambda P: np.linalg.norm(P, axis=-1) - 22.0, g.TISSUE)])
+    out = tmp_path / "out"
+    run = subprocess.run([sys.executable, str(CLI), "--ct", str(tmp_path / "ct"), "--sphere", "0", "-22", "0", "12",
+                          "--steps", "shell", "--thickness-mm", "4", "--resolution-mm", "1", "--out", str(out)],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["steps_done"] == ["shell", "rtstruct"] and "RS_bolus.dcm" in report["outputs"]
+    src = report["input"]
+    assert (src["patient_id"], src["series"], src["frame"]) == ("BOLUS-TEST", ids["series"], ids["frame"])
+    m = check_rtstruct(str(out / "RS_bolus.dcm"), str(tmp_path / "ct"), "Bolus")
+    assert m["plane_err"] <= 0.01 and m["refs_ok"] and m["frame_ok"] and m["kind"] == "BOLUS"
+    assert report["results"]["rtstruct"]["frame"] == ids["frame"]
+
+
+def test_ct_and_a_mesh_file_together_are_refused(stl, tmp_path):
+    run = subprocess.run([sys.executable, str(CLI), str(stl), "--ct", str(tmp_path), "--out", str(tmp_path / "o")],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and "one of the two" in run.stderr

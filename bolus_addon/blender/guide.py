@@ -162,6 +162,7 @@ def has_patches(obj) -> bool:
 
 #: what each operator needs (its poll and the panel ask `reason`); an operator not listed needs a mesh
 NEEDS = {
+    "bolus.import_dicom": (),  # a new object from a folder: nothing selected is needed
     "bolus.segment": (needs_mesh, needs_not_pattern("segment that")),
     "bolus.smooth_cuts": (needs_patches,),
     "bolus.improve_flattenability": (needs_mesh, needs_not_pattern("improve that"), needs_not_improved),

@@ -99,6 +99,14 @@ PROP_RETRIEVAL = "bolus_retrieval"
 PROP_RETRIEVAL_INFO = "bolus_retrieval_info"  #: ours: the last retrieval's method, photo and confidence
 PROP_LIBRARY = "bolus_library"
 PROP_MATCH_SOURCE = "bolus_library_model"
+#: SPEC: a skin imported from a planning CT (and every object made from it): its frame of
+#: reference, study, CT series, CT folder and patient, so the bolus goes back onto that CT
+PROP_DICOM_FRAME = "bolus_dicom_frame_uid"
+PROP_DICOM_STUDY = "bolus_dicom_study_uid"
+PROP_DICOM_SERIES = "bolus_dicom_ct_series_uid"
+PROP_DICOM_DIR = "bolus_dicom_ct_dir"
+PROP_DICOM_PATIENT = "bolus_dicom_patient_id"
+DICOM_PROPS = (PROP_DICOM_FRAME, PROP_DICOM_STUDY, PROP_DICOM_SERIES, PROP_DICOM_DIR, PROP_DICOM_PATIENT)
 
 
 # ------------------------------------------------------------------ what an object is
@@ -186,3 +194,15 @@ def print_source(obj):
             and PROP_IMPROVE_TABLE not in obj):
         return bpy.data.objects.get(obj[PROP_PART_SOURCE], obj)
     return obj
+
+
+def dicom_source(obj):
+    """The first object along the source chain (obj, its ``bolus_source``, that one's ...) that
+    carries the DICOM frame (``bolus_dicom_frame_uid``), or None."""
+    seen = set()
+    while obj is not None and obj.name not in seen:
+        if PROP_DICOM_FRAME in obj:
+            return obj
+        seen.add(obj.name)
+        obj = bpy.data.objects.get(str(obj.get(PROP_SOURCE, "")))
+    return None

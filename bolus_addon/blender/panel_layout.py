@@ -15,6 +15,7 @@ from . import guide
 
 #: operator property <- Scene.bolus property, for the buttons of the panel and the menu
 OP_SETTINGS = {
+    "bolus.import_dicom": {},
     "bolus.select_area": {"radius_mm": "area_radius_mm", "exclude_cavities": "exclude_cavities"},
     "bolus.saliency_preview": {"smoothing_mm": "smoothing_mm", "color_by": "color_by"},
     "bolus.segment": {"patches": "patches", "eta": "eta", "seed": "seed", "smoothing_mm": "smoothing_mm",
@@ -29,6 +30,7 @@ OP_SETTINGS = {
     "bolus.print_segment": {"parts": "parts", "method": "print_method", "seed": "seed"},
     "bolus.orient_parts": {"layer_mm": "layer_mm", "skin_side_up": "skin_side_up"},
     "bolus.export_parts": {},
+    "bolus.export_rtstruct": {},
     "bolus.build_library": {"directory": "library_dir"},
     "bolus.retrieve": {"filepath": "photo_path", "directory": "library_dir", "count": "retrieve_count",
                        "method": "retrieve_method"},
@@ -36,6 +38,8 @@ OP_SETTINGS = {
 
 #: (number, title, icon, hint: what it does and what it needs) of every step, in order
 STEPS = {
+    "ct": ("0", "Import planning CT", "IMPORT", "The skin from a DICOM CT folder: the CT at a HU threshold, or its "
+                                               "structure set's External ROI (optional: else import an STL in mm)"),
     "area": ("1", "Select area", "PIVOT_CURSOR", "Faces around the 3D cursor (needs: the skin, the cursor on it)"),
     "preview": ("2", "Preview", "COLOR", "Where the skin cannot lie flat (needs: the skin)"),
     "segment": ("3", "Segment", "MESH_ICOSPHERE", "Patches that flatten well (needs: the skin in one piece)"),
@@ -45,11 +49,13 @@ STEPS = {
     "sheet": ("6a", "Sheet pattern", "UV", "Flat pattern at true size, then export (needs: the skin, "
                                           "best with patches)"),
     "print": ("6b", "Printed bolus", "MOD_SOLIDIFY", "Solid, print parts, orient, export STL (needs: the skin)"),
+    "planning": ("6c", "Export to planning system", "EXPORT", "The bolus as an RTSTRUCT on its planning CT (needs: "
+                                                          "a closed solid on a DICOM skin, or the CT folder)"),
     "library": ("7", "Bolus library", "ASSET_MANAGER", "A stored bolus like a photo, to start from (needs: a folder "
                                                      "of .blend / .stl / .obj models, a photo)"),
 }
 #: the step each operator belongs to
-STEP_OF = {"bolus.select_area": "area", "bolus.saliency_preview": "preview", "bolus.segment": "segment",
+STEP_OF = {"bolus.import_dicom": "ct", "bolus.export_rtstruct": "planning", "bolus.select_area": "area", "bolus.saliency_preview": "preview", "bolus.segment": "segment",
            "bolus.smooth_cuts": "cuts", "bolus.improve_flattenability": "improve", "bolus.unfold": "sheet",
            "bolus.export_pattern": "sheet", "bolus.make_shell": "print", "bolus.print_segment": "print",
            "bolus.orient_parts": "print", "bolus.export_parts": "print", "bolus.build_library": "library",

@@ -29,6 +29,7 @@ from ..blender.labels import engrave_with, label_outlines, left_vector
 from ..blender.objects import (
     ATTR_SHELL_SIDE,
     BOLUS_SUFFIX,
+    DICOM_PROPS,
     PROP_CLEARANCE,
     PROP_DENSITY,
     PROP_HOLES,
@@ -183,6 +184,9 @@ class BOLUS_OT_make_shell(BolusOperator, bpy.types.Operator):
         obj[PROP_SKIN_MESH] = skin_me.name
         obj[PROP_SOLID_MESH] = solid_me.name
         obj[PROP_HOLES] = int(shell.holes)
+        for key in DICOM_PROPS:  # a bolus on a DICOM skin goes back onto that CT
+            if key in src:
+                obj[key] = src[key]
         return obj
 
 

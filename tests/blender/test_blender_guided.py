@@ -17,8 +17,8 @@ from test_blender_panel import RecordingLayout, draw_panel
 pytestmark = pytest.mark.blender
 
 #: the steps' titles, in the order the panel must show them
-STEP_TITLES = ["1  Select area", "2  Preview", "3  Segment", "4  Smooth cuts", "5  Improve (optional)",
-               "6a  Sheet pattern", "6b  Printed bolus"]
+STEP_TITLES = ["0  Import planning CT", "1  Select area", "2  Preview", "3  Segment", "4  Smooth cuts",
+               "5  Improve (optional)", "6a  Sheet pattern", "6b  Printed bolus", "6c  Export to planning system"]
 
 
 def bolus_operators(bpy) -> list[str]:
@@ -26,8 +26,9 @@ def bolus_operators(bpy) -> list[str]:
     return sorted(f"bolus.{name}" for name in dir(bpy.ops.bolus) if not name.startswith("_"))
 
 
-#: the library's operators work on a folder and a photo, not on the active object: never greyed for it
-LIBRARY_OPS = {"bolus.build_library", "bolus.retrieve"}
+#: the library's operators work on a folder and a photo, the planning CT's import on a folder, not on the
+#: active object: never greyed for it
+LIBRARY_OPS = {"bolus.build_library", "bolus.retrieve", "bolus.import_dicom"}
 
 
 def op(bpy, idname):
@@ -193,10 +194,10 @@ def test_panel_steps_are_numbered_in_order_with_the_unit_and_the_disclaimer(bpy_
     for kind, t in log:
         if kind == "operator":
             first.setdefault(t, len(first))
-    assert list(first) == ["bolus.select_area", "bolus.saliency_preview", "bolus.segment", "bolus.smooth_cuts",
-                           "bolus.improve_flattenability", "bolus.unfold", "bolus.export_pattern",
+    assert list(first) == ["bolus.import_dicom", "bolus.select_area", "bolus.saliency_preview", "bolus.segment",
+                           "bolus.smooth_cuts", "bolus.improve_flattenability", "bolus.unfold", "bolus.export_pattern",
                            "bolus.make_shell", "bolus.print_segment", "bolus.orient_parts", "bolus.export_parts",
-                           "bolus.build_library", "bolus.retrieve"]
+                           "bolus.export_rtstruct", "bolus.build_library", "bolus.retrieve"]
 
 
 def test_panel_warns_in_red_when_the_size_says_the_units_are_wrong(bpy_addon, scene):

@@ -1,0 +1,1 @@
+"""The planning CT in, the bolus back: DICOM CT series and RTSTRUCT (pydicom, bpy-free)."""
