@@ -6,11 +6,12 @@ active and selected, with the ``bolus_dicom_*`` custom properties (`objects.DICO
 Export: the selected closed solids in world mm (`mesh_region.read_region` of each), on the CT
 found through the source chain's ``bolus_dicom_*`` properties (`objects.dicom_source`) or the
 folder given; `core.dicom.planning.export_rtstruct` writes the file atomically.  Both run their
-core call in `compute`: from the sidebar with a directory or file already chosen it runs in a
-worker thread (progress, Esc); after the file browser, in the main thread with the progress bar.
+core call in `compute`, in a worker thread (progress bar, Esc) from the sidebar, with the folder or
+file already chosen or after the file browser (`_BrowseThenThread`); from a script in the main thread.
 """
 from __future__ import annotations
 
+import functools
 import os
 
 import bpy
@@ -40,7 +41,27 @@ SOURCE_ITEMS = [
 ]
 
 
-class BOLUS_OT_import_dicom(BolusOperator, bpy.types.Operator):
+class _BrowseThenThread:
+    """The file browser first, then the worker thread: ``invoke`` opens the browser when no path
+    is set and marks it (``browsed``); Blender then calls ``execute``, which runs `compute` in a
+    worker thread like the sidebar's run (Esc cancels) instead of in the main thread."""
+
+    browsed: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
+
+    def browse(self, context):
+        self.browsed = True
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        if self.browsed and getattr(context, "window", None) is not None:
+            self.browsed = False
+            return self._guarded(functools.partial(BolusOperator._threaded_invoke, self), context, None,
+                                 on_error=self.abort)
+        return BolusOperator.execute(self, context)
+
+
+class BOLUS_OT_import_dicom(_BrowseThenThread, BolusOperator, bpy.types.Operator):
     """Import the skin from a planning CT folder (DICOM): from the CT at a HU threshold or from the structure set's External ROI, in patient coordinates (LPS, mm), with the CT's identifiers so the bolus can go back as an RTSTRUCT. Needs a folder of CT slices (uncompressed); makes a new object"""
 
     bl_idname = "bolus.import_dicom"
@@ -64,8 +85,7 @@ class BOLUS_OT_import_dicom(BolusOperator, bpy.types.Operator):
 
     def invoke(self, context, event):
         if not self.directory:
-            context.window_manager.fileselect_add(self)
-            return {"RUNNING_MODAL"}
+            return self.browse(context)
         return BolusOperator._threaded_invoke(self, context, event)
 
     def prepare(self, context):
@@ -114,7 +134,7 @@ def _selected_solids(context) -> list:
     return objs
 
 
-class BOLUS_OT_export_rtstruct(BolusOperator, bpy.types.Operator):
+class BOLUS_OT_export_rtstruct(_BrowseThenThread, BolusOperator, bpy.types.Operator):
     """Export the selected closed solids as an RTSTRUCT on the planning CT their skin came from: exact sections at every CT slice, RT ROI Interpreted Type BOLUS. Needs a closed solid made on a skin from Import Planning CT (or a CT folder). Check the structure in the planning system before use"""
 
     bl_idname = "bolus.export_rtstruct"
@@ -138,8 +158,7 @@ class BOLUS_OT_export_rtstruct(BolusOperator, bpy.types.Operator):
             src = dicom_source(context.active_object)
             folder = str(src[PROP_DICOM_DIR]) if src is not None and PROP_DICOM_DIR in src else os.getcwd()
             self.filepath = os.path.join(folder, "RS_bolus.dcm")
-            context.window_manager.fileselect_add(self)
-            return {"RUNNING_MODAL"}
+            return self.browse(context)
         return BolusOperator._threaded_invoke(self, context, event)
 
     def prepare(self, context):

@@ -30,6 +30,8 @@ pytestmark = pytest.mark.blender
 #: the operators that run compute() in a worker thread from the sidebar
 THREADED = ("saliency_preview", "segment", "smooth_cuts", "select_area", "unfold", "make_shell", "print_segment",
             "orient_parts", "build_library", "retrieve")
+#: threaded too, with an invoke of their own that opens the file browser first (tested below)
+BROWSING = ("import_dicom", "export_rtstruct")
 #: the one that keeps its own step job (one job step per timer tick; Esc keeps the best so far)
 STEPPED = ("improve_flattenability",)
 
@@ -278,7 +280,7 @@ def test_long_operators_are_threaded(bpy_addon):
 
 # ------------------------------------------------------------------ the real operators
 def operator_class(name):
-    for mod in ("analysis", "cuts", "area", "unfold", "solid", "printing", "retrieval"):
+    for mod in ("analysis", "cuts", "area", "unfold", "solid", "printing", "retrieval", "dicom"):
         m = sys.modules[f"bolus.bolus_addon.operators.{mod}"]
         for v in vars(m).values():
             if isinstance(v, type) and getattr(v, "bl_idname", None) == f"bolus.{name}":
@@ -292,8 +294,11 @@ def fake_of(bpy, name, **props):
     from bolus.bolus_addon.blender.operator_base import BolusOperator  # noqa: PLC0415
 
     Op = operator_class(name)
-    ns = {k: v for k, v in Op.__dict__.items()
-          if isinstance(v, (types.FunctionType, staticmethod)) and k not in ("invoke", "modal")}
+    ns = {}
+    for klass in reversed(Op.__mro__):  # the operator and the mixins of its own module
+        if klass.__module__ == Op.__module__:
+            ns.update({k: v for k, v in klass.__dict__.items()
+                       if isinstance(v, (types.FunctionType, staticmethod)) and k not in ("invoke", "modal")})
     rna = getattr(bpy.ops.bolus, name).get_rna_type()
     values = {p.identifier: p.default for p in rna.properties if p.identifier != "rna_type"}
     values.update(props)
@@ -567,3 +572,57 @@ def test_cancelled_run_leaves_nothing_for_undo(bpy_addon, scene):
     assert_same_object(before, after)
     assert_same_object(before, undone)
     assert datablocks(bpy) == blocks
+
+
+def _small_ct(path):
+    import dicomgen as g  # noqa: PLC0415
+
+    grid = g.Grid(rows=40, cols=44, spacing=(1.0, 0.9), positions=np.arange(20) * 2.0 - 19.0,
+                  origin=np.array([-19.8, -20.0, 0.0]))
+    return g.sdf_series(str(path), grid, [(lambda P: np.linalg.norm(P, axis=-1) - 15.0, g.TISSUE)])
+
+
+@pytest.mark.parametrize("browsed", [False, True])
+def test_dicom_import_and_export_threaded_as_executed(bpy_addon, scene, tmp_path, browsed):
+    """From the sidebar (folder set) or after the file browser (execute, marked ``browsed``) the
+    import and the export run in the worker thread, with Esc, and give what a script's call gives."""
+    pytest.importorskip("pydicom")
+    import dicomgen as g  # noqa: PLC0415
+    import manifold3d as m3  # noqa: PLC0415
+    from dicomcheck import check_rtstruct  # noqa: PLC0415
+
+    bpy = bpy_addon
+    _small_ct(tmp_path / "ct")
+    ct = str(tmp_path / "ct")
+    # the script's call, for comparison
+    assert bpy.ops.bolus.import_dicom(directory=ct, source="CT") == {"FINISHED"}
+    executed = bpy.context.active_object
+    V0 = np.array([v.co for v in executed.data.vertices])
+    names = set(bpy.data.objects.keys())
+    Fake = fake_of(bpy, "import_dicom", directory=ct, source="CT", browsed=browsed)
+    ctx, op = Ctx(bpy), Fake()
+    start = op.execute(ctx) if browsed else op.invoke(ctx, event("LEFTMOUSE"))
+    assert start == {"RUNNING_MODAL"}, op.reports
+    assert op.modal(ctx, event("ESC")) == {"CANCELLED"}
+    op._worker.thread.join(600)
+    assert set(bpy.data.objects.keys()) == names  # nothing added on Esc
+    ctx, op = Ctx(bpy), Fake()
+    assert (op.execute(ctx) if browsed else op.invoke(ctx, event("LEFTMOUSE"))) == {"RUNNING_MODAL"}
+    assert tick_until_done(op, ctx) == {"FINISHED"}, op.reports
+    assert ctx.window_manager.timers == [] and ctx.window_manager.bar == 0
+    threaded = bpy.context.active_object
+    assert threaded.name not in names
+    np.testing.assert_array_equal(np.array([v.co for v in threaded.data.vertices]), V0)
+    # the export of a closed solid on that CT, threaded
+    V, F = g.manifold_arrays(m3.Manifold.sphere(12.0, 40))
+    for ob in bpy.context.selected_objects:
+        ob.select_set(False)
+    solid = make_object(bpy, V / 1000.0, F, name="solid")
+    solid["bolus_source"] = threaded.name
+    path = str(tmp_path / "rs.dcm")
+    Fake = fake_of(bpy, "export_rtstruct", filepath=path, browsed=browsed)
+    ctx, op = Ctx(bpy), Fake()
+    assert (op.execute(ctx) if browsed else op.invoke(ctx, event("LEFTMOUSE"))) == {"RUNNING_MODAL"}, op.reports
+    assert tick_until_done(op, ctx) == {"FINISHED"}, op.reports
+    m = check_rtstruct(path, ct, "Bolus", V, F)
+    assert m["refs_ok"] and m["frame_ok"] and m["kind"] == "BOLUS" and m["dice"] >= 0.99
