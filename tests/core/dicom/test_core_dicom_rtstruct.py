@@ -58,6 +58,28 @@ def test_sections_pass_the_independent_reader(tmp_path, solid):
     assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp")]
 
 
+def test_pieces_touching_along_a_face_give_one_contour_per_slice(tmp_path):
+    """A solid cut in two along a plane and put back (a bolus split into print parts): one mesh
+    of two closed pieces that touch; each slice has the one outer contour of the whole, no slit
+    between the pieces, and the reader's volume and Dice hold against the whole solid."""
+    _, ids = _ct(tmp_path / "ct")
+    whole = m3.Manifold.cube([30.0, 24.0, 30.0], center=True).rotate([0.0, 0.0, 17.0]).translate([0.3, 0.2, 0.5])
+    cut = m3.Manifold.cube([60.0, 60.0, 60.0]).translate([-60.0, -30.0, -30.0]).rotate([0.0, 0.0, 40.0])
+    a, b = whole ^ cut, whole - cut
+    Va, Fa = g.manifold_arrays(a)
+    Vb, Fb = g.manifold_arrays(b)
+    V, F = np.vstack([Va, Vb]), np.vstack([Fa, Fb + len(Va)])
+    out = str(tmp_path / "rs.dcm")
+    planning.export_rtstruct(out, str(tmp_path / "ct"), [("Bolus", V, F)])
+    Vw, Fw = g.manifold_arrays(whole)
+    _assert_spec(check_rtstruct(out, str(tmp_path / "ct"), "Bolus", Vw, Fw))
+    per_slice = {}
+    for c in pydicom.dcmread(out).ROIContourSequence[0].ContourSequence:
+        uid = c.ContourImageSequence[0].ReferencedSOPInstanceUID
+        per_slice[uid] = per_slice.get(uid, 0) + 1
+    assert per_slice and set(per_slice.values()) == {1}, per_slice
+
+
 def test_oblique_ct_sections_lie_on_its_planes(tmp_path):
     a = np.radians(15.0)
     _ct(tmp_path / "ct", row_cos=np.array([np.cos(a), np.sin(a), 0.0]), col_cos=np.array([0.0, 0.0, -1.0]))
