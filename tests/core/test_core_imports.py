@@ -7,7 +7,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 CORE = ROOT / "bolus_addon" / "core"
 FORBIDDEN = {"bpy", "bmesh", "mathutils", "gpu", "bl_math", "bpy_extras"}
-ALLOWED_THIRD_PARTY = {"numpy", "scipy", "sklearn", "manifold3d", "igl", "ezdxf", "fpdf", "threadpoolctl", "pydicom"}  # manifold3d: the volume library; igl (libigl): the compiled marching cubes; ezdxf, fpdf (fpdf2): the DXF and PDF writers; threadpoolctl (a scikit-learn dependency, bundled): one BLAS thread for L-BFGS-B; pydicom: the planning CT and RTSTRUCT
+ALLOWED_THIRD_PARTY = {"numpy", "scipy", "sklearn", "manifold3d", "igl", "ezdxf", "fpdf", "threadpoolctl", "joblib", "pydicom"}  # manifold3d: the volume library; igl (libigl): the compiled marching cubes; ezdxf, fpdf (fpdf2): the DXF and PDF writers; threadpoolctl, joblib (scikit-learn dependencies, bundled): one BLAS thread for L-BFGS-B, the retrieval library built in threads; pydicom: the planning CT and RTSTRUCT
 
 
 def imported_top_modules(path: Path) -> set[str]:
