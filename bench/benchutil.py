@@ -260,12 +260,17 @@ def captured_output(enabled: bool = True):
         os.close(saved[1])
 
 
-def current_rss_kb() -> int:
+def status_kb(field: str) -> int:
+    """A kB figure of this process from /proc/self/status (VmRSS, VmHWM, ...); 0 where there is none."""
     with open("/proc/self/status") as fh:
         for line in fh:
-            if line.startswith("VmRSS:"):
+            if line.startswith(field + ":"):
                 return int(line.split()[1])
     return 0
+
+
+def current_rss_kb() -> int:
+    return status_kb("VmRSS")
 
 
 def reset_peak_rss() -> bool:

@@ -35,7 +35,7 @@ import sys
 import tempfile
 import time
 
-import benchutil  # noqa: F401  (puts the repository and tests/ on sys.path)
+import benchutil  # (also puts the repository and tests/ on sys.path)
 import numpy as np
 
 import dicomgen as g
@@ -60,13 +60,6 @@ def make_ct(directory: str, slices: int, size: int) -> g.Grid:
     return grid
 
 
-def _vm(field: str) -> int:
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith(field + ":"):
-                return int(line.split()[1])
-    return 0
-
 
 def worker(kind: str, directory: str) -> dict:
     """One import in this fresh process -> seconds, peak MB above the start, quality."""
@@ -74,7 +67,7 @@ def worker(kind: str, directory: str) -> dict:
     from bolus_addon.core.solid.marching import marching_cubes
 
     benchutil.reset_peak_rss()
-    before = _vm("VmRSS")
+    before = benchutil.status_kb("VmRSS")
     t0 = time.perf_counter()
     if kind == "ours":
         skin = planning.import_skin(directory, "CT", THRESHOLD)
@@ -84,7 +77,7 @@ def worker(kind: str, directory: str) -> dict:
         V, F = marching_cubes(vol.hu - np.float32(THRESHOLD), np.zeros(3), np.ones(3), pad=True)
         V = vol.to_patient(V)
     took = time.perf_counter() - t0
-    peak = (_vm("VmHWM") - before) / 1024
+    peak = (benchutil.status_kb("VmHWM") - before) / 1024
     z = V[:, 2]
     side = np.abs(z - 0.5 * (z.min() + z.max())) < 0.5 * np.ptp(z) - 2 * SLICE_MM  # the end caps left out
     d = np.abs(g.torso_sdf(V[side]))

@@ -77,6 +77,7 @@ from retrieval_photos import KINDS, composite, photos_of  # noqa: E402
 from bolus_addon.core.errors import BolusError  # noqa: E402
 from bolus_addon.core.mesh.objfile import load_obj  # noqa: E402
 from bolus_addon.core.retrieval.metrics import query_scores, summarise  # noqa: E402
+from bolus_addon.core.retrieval.view_render import row_spans  # noqa: E402
 
 SEED = 0
 VIEWS_NAME, SEED_NAME, HU_NAME = "VIEWS", "SKELETON", "HU"
@@ -249,29 +250,10 @@ def silhouette(V: np.ndarray, F: np.ndarray, direction, size: int = SILHOUETTE_P
     s = (size - 5) / max(float(ext.max()), 1e-12)
     w, h = (np.ceil(ext * s).astype(int) + 5)
     T = ((P - lo) * s + 2.0)[np.asarray(F)]  # (m,3,2) pixel units, x right, y up
-    # rows j whose centre j + 0.5 lies within each triangle's y range
-    j0 = np.ceil(T[:, :, 1].min(axis=1) - 0.5).astype(np.int64)
-    j1 = np.floor(T[:, :, 1].max(axis=1) - 0.5).astype(np.int64)
-    count = np.maximum(j1 - j0 + 1, 0)
-    tri = np.repeat(np.arange(len(T)), count)
-    first = np.cumsum(count) - count
-    j = j0[tri] + np.arange(tri.size) - first[tri]
-    cy = j + 0.5
-    xs = []
-    for a, b in ((0, 1), (1, 2), (2, 0)):  # where each edge crosses the row (NaN when it does not)
-        ya, yb = T[tri, a, 1], T[tri, b, 1]
-        xa, xb = T[tri, a, 0], T[tri, b, 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x = xa + (cy - ya) * (xb - xa) / (yb - ya)
-        ok = (yb != ya) & (cy >= np.minimum(ya, yb)) & (cy <= np.maximum(ya, yb))
-        xs.append(np.where(ok, x, np.nan))
-    xs = np.array(xs)
-    has = ~np.all(np.isnan(xs), axis=0)
-    with np.errstate(invalid="ignore"):
-        xl, xr = np.nanmin(xs[:, has], axis=0), np.nanmax(xs[:, has], axis=0)
+    tri, j, xl, xr = row_spans(T)  # the core's scanline spans: each row centre inside each triangle
     i0 = np.clip(np.ceil(xl - 0.5).astype(np.int64), 0, w)
     i1 = np.clip(np.floor(xr - 0.5).astype(np.int64) + 1, 0, w)
-    rows = np.clip(h - 1 - j[has], 0, h - 1)
+    rows = np.clip(h - 1 - j, 0, h - 1)
     keep = i1 > i0
     diff = np.zeros((h, w + 1), dtype=np.int64)
     np.add.at(diff, (rows[keep], i0[keep]), 1)

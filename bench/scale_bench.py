@@ -130,13 +130,6 @@ def build_inputs(sizes, steps, folder: Path) -> dict:
 # ----------------------------------------------------------------------------- the child
 
 
-def _vm(field: str) -> int:
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith(field + ":"):
-                return int(line.split()[1])
-    return 0
-
 
 def worker(step: str, path: str) -> dict:
     """Run one step on the mesh in path (in this fresh process) -> seconds, peak and delta MB, a note."""
@@ -173,12 +166,12 @@ def worker(step: str, path: str) -> dict:
     else:
         raise ValueError(step)
     gc.collect()
-    before = _vm("VmRSS")
+    before = benchutil.status_kb("VmRSS")
     reset = benchutil.reset_peak_rss()
     t0 = time.perf_counter()
     res = call()
     dt = time.perf_counter() - t0
-    peak = _vm("VmHWM")
+    peak = benchutil.status_kb("VmHWM")
     if step in ("segment", "segment_alone"):
         note = f"{len(np.unique(res.face_labels))} patches"
     elif step == "cuts":

@@ -509,13 +509,6 @@ def solidify_arrays(bpy, V, F, mode: str, thickness: float = THICKNESS_MM, timer
 # ----------------------------------------------------------------------------- child processes
 
 
-def _status_kb(key: str) -> int:
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith(key + ":"):
-                return int(line.split()[1])
-    return 0
-
 
 def measured(fn):
     """(fn(), stats): wall time of the call, the CPU time of all its threads (the machine is shared: CPU time
@@ -523,14 +516,14 @@ def measured(fn):
     import resource
 
     gc.collect()
-    rss0 = _status_kb("VmRSS")
+    rss0 = benchutil.status_kb("VmRSS")
     reset = benchutil.reset_peak_rss()
     r0 = resource.getrusage(resource.RUSAGE_SELF)
     t0 = time.perf_counter()
     res = fn()
     dt = time.perf_counter() - t0
     r1 = resource.getrusage(resource.RUSAGE_SELF)
-    hwm = _status_kb("VmHWM")
+    hwm = benchutil.status_kb("VmHWM")
     return res, {"seconds": dt, "cpu_seconds": (r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime),
                  "rss_before_mb": rss0 / 1024.0, "peak_mb": hwm / 1024.0,
                  "peak_delta_mb": (hwm - rss0) / 1024.0 if reset else None}

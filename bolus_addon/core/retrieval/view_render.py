@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import BolusError
 
-__all__ = ["fibonacci_directions", "view_frame", "render_views", "MARGIN_PX"]
+__all__ = ["row_spans", "fibonacci_directions", "view_frame", "render_views", "MARGIN_PX"]
 
 MARGIN_PX = 2  #: empty pixels round the projection
 GOLDEN = np.pi * (3.0 - np.sqrt(5.0))  #: the golden angle (rad)
@@ -49,7 +49,7 @@ def view_frame(direction) -> np.ndarray:
     return np.column_stack([np.cross(u, d), u, d])
 
 
-def _spans(T: np.ndarray):
+def row_spans(T: np.ndarray):
     """(triangle index, row j, x from, x to) of every row centre j + 0.5 inside each triangle T (m,3,2)."""
     j0 = np.ceil(T[:, :, 1].min(axis=1) - 0.5).astype(np.int64)
     j1 = np.floor(T[:, :, 1].max(axis=1) - 0.5).astype(np.int64)
@@ -74,7 +74,7 @@ def _spans(T: np.ndarray):
 def _one_view(P: np.ndarray, z: np.ndarray, F: np.ndarray, size: int, depth: bool):
     """Silhouette (size,size) bool (row 0 at the top) and z-buffer of points P (n,2) in pixels (y up)."""
     T = P[F]
-    tri, j, xl, xr = _spans(T)
+    tri, j, xl, xr = row_spans(T)
     i0 = np.clip(np.ceil(xl - 0.5).astype(np.int64), 0, size)
     i1 = np.clip(np.floor(xr - 0.5).astype(np.int64) + 1, 0, size)
     rows = np.clip(size - 1 - j, 0, size - 1)
