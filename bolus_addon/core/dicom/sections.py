@@ -7,8 +7,8 @@ holes: a planning system reads nested contours even-odd).  Each polygon's points
 into LPS with z exactly the slice's position, so they lie on the slice's plane to rounding.
 Pieces that touch along a face (a bolus split into print parts, reassembled in place) come out
 of the slice as polygons side by side, or one with slits of no width between them (rounding):
-each section is closed by `SLIT_MM` (offset out by half of it, then in, mitred corners), which
-merges them and fills the slits and moves nothing wider; a polygon still narrower than that on
+each section is closed by `SLIT_MM` (offset out by half of it, then in, corners mitred up to
+`MITER_LIMIT`), which merges them, fills the slits and moves nothing wider; a polygon still narrower than that on
 average (twice its area over its perimeter) is left out.
 """
 from __future__ import annotations
@@ -26,6 +26,9 @@ MIN_POINTS = 3
 #: mm: a polygon whose mean width (2 area / perimeter) is below this is a slit between touching
 #: pieces (measured on a split chest bolus: 1e-6 mm; the parts' peg clearance rings are 0.2 mm)
 SLIT_MM = 0.01
+#: miters up to this many offsets long: out and back in, a corner of 0.12 degree or more comes back
+#: where it was (Clipper's default of 2 squares such a corner off and adds a vertex there)
+MITER_LIMIT = 1000.0
 #: decimals of a coordinate in mm: 1e-6 mm, and at most 16 characters below 1e8 mm
 DS_DECIMALS = 6
 
@@ -44,7 +47,8 @@ def slice_sections(vol: CTVolume, V: np.ndarray, F: np.ndarray, what: str = "the
         polys = []
         if lo <= z <= hi:
             cs = M.slice(float(z))
-            cs = cs.offset(0.5 * SLIT_MM, m3.JoinType.Miter).offset(-0.5 * SLIT_MM, m3.JoinType.Miter)
+            cs = (cs.offset(0.5 * SLIT_MM, m3.JoinType.Miter, MITER_LIMIT)
+                  .offset(-0.5 * SLIT_MM, m3.JoinType.Miter, MITER_LIMIT))
             for poly in cs.to_polygons():
                 xy = np.asarray(poly, dtype=np.float64)
                 if len(xy) < MIN_POINTS or _mean_width(xy) < SLIT_MM:
