@@ -171,6 +171,7 @@ def test_threaded_run_progress_and_finish(bpy_addon):
     assert op.modal(ctx, event("G")) == {"RUNNING_MODAL"}  # anything else waits: the mesh must not change
     job.go.set()
     assert tick_until_done(op, ctx) == {"FINISHED"}
+    worker.thread.join(10)  # `done` is set in the thread's last statement: it ends right after
     assert job.threads and job.threads[0] is not threading.main_thread() and not worker.thread.is_alive()
     assert op.finished == [(threading.main_thread(), 6)]
     assert op.reports == [({"INFO"}, "done: 6")]
@@ -426,6 +427,7 @@ def modal_run(bpy, name, props, cancel_first=True):
         threading.setprofile(None)
     worker = op._worker
     assert tick_until_done(op, ctx) == {"FINISHED"}, op.reports
+    worker.thread.join(10)  # `done` is set in the thread's last statement: it ends right after
     assert not worker.thread.is_alive()
     assert watch.calls, "the profiler saw nothing"
     assert watch.not_bpy_free(module_file) == [], name
