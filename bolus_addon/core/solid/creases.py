@@ -29,9 +29,6 @@ __all__ = ["sharpen_creases", "CREASE_ROUNDS"]
 CREASE_ROUNDS = 4
 #: rounds of undoing the moves that make triangles cross (then every move is undone)
 CROSS_ROUNDS = 6
-#: a vertex moved by more than this share of a voxel is checked for crossings (the projection of
-#: a vertex onto its own face moves it by far less; the moves onto a crease by up to a voxel)
-MOVED_FRACTION = 0.05
 
 
 class _Faces:
@@ -229,7 +226,7 @@ def sharpen_creases(skin, V, F, t, c, cap, res):
     for _ in range(CROSS_ROUNDS):
         V2, F2, parent = _split_unturned(V, FA, E, X, ok, keys, len(V))
         Fall = np.concatenate([F[~A], F2])
-        moved = np.linalg.norm(V - V0, axis=1) > MOVED_FRACTION * res
+        moved = np.any(V != V0, axis=1)  # the vertices pulled onto a crease
         among = np.concatenate([np.nonzero(moved[F[~A]].any(axis=1))[0], np.sum(~A) + np.arange(len(F2))])
         pairs = crossing_pairs(V2, Fall, among, float32=True)
         if len(pairs) == 0:
