@@ -18,7 +18,7 @@ from .rtstruct_write import write_rtstruct
 from .series import read_ct, read_folder, scan_folder, choose_series
 from .skin import skin_from_ct
 
-__all__ = ["SOURCES", "ImportedSkin", "import_skin", "export_rtstruct", "ct_summary"]
+__all__ = ["SOURCES", "ImportedSkin", "import_skin", "export_rtstruct", "coverage_warnings", "ct_summary"]
 
 SOURCES = ("AUTO", "CT", "RTSTRUCT")
 
@@ -118,8 +118,30 @@ def export_rtstruct(path: str, ct_directory: str, solids: list, rel_electron_den
         if sets:
             existing = _without(sets[0].ds, {name for name, _, _ in solids})
             carried = [str(r.ROIName) for r in getattr(existing, "StructureSetROISequence", [])]
+    for name, V, _ in solids:
+        warnings += coverage_warnings(vol, name, V)
     out = write_rtstruct(path, vol, solids, rel_electron_density, existing, progress)
     out.update(existing=carried, warnings=warnings, summary=ct_summary(vol))
+    return out
+
+
+def coverage_warnings(vol, name: str, V) -> list:
+    """What of the solid V (n,3) LPS mm lies beyond the CT (the slices' range along the normal,
+    half a spacing past the end slices, or the image's rows and columns): the structure stops
+    there and the planning system computes no dose with that part; one message per side, in mm."""
+    A = vol.to_slice_frame()
+    P = np.asarray(V, dtype=np.float64) @ A[:3, :3].T + A[:3, 3]
+    rows, cols = vol.hu.shape[1:]
+    dr, dc = vol.spacing
+    half = 0.5 * vol.slice_spacing
+    box = [("along the slice normal", 2, vol.positions[0] - half, vol.positions[-1] + half),
+           ("across the rows", 0, -0.5 * dc, (cols - 0.5) * dc), ("along the columns", 1, -0.5 * dr, (rows - 0.5) * dr)]
+    out = []
+    for what, ax, lo, hi in box:
+        beyond = max(lo - float(P[:, ax].min()), float(P[:, ax].max()) - hi)
+        if beyond > 0.01:
+            out.append(f"'{name}' reaches {beyond:.1f} mm beyond the CT {what}: its structure stops at the CT's edge "
+                       f"and that part gets no dose calculation; extend the CT or trim the bolus")
     return out
 
 

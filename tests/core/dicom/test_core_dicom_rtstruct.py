@@ -80,6 +80,19 @@ def test_pieces_touching_along_a_face_give_one_contour_per_slice(tmp_path):
     assert per_slice and set(per_slice.values()) == {1}, per_slice
 
 
+def test_a_solid_beyond_the_ct_is_warned_with_its_figure(tmp_path):
+    """The CT's slices run from -23 to +23 mm (2 mm apart): a sphere of 18 mm radius centred at
+    z = 14 reaches 32 mm, 8 mm beyond the last slice's half spacing (24 mm); one inside is not warned."""
+    _ct(tmp_path / "ct")
+    far = g.manifold_arrays(m3.Manifold.sphere(18.0, 48).translate([0.0, 0.0, 14.0]))
+    res = planning.export_rtstruct(str(tmp_path / "far.dcm"), str(tmp_path / "ct"), [("Bolus", *far)])
+    msgs = [w for w in res["warnings"] if "beyond the CT" in w]
+    assert len(msgs) == 1 and "along the slice normal" in msgs[0], res["warnings"]
+    assert float(msgs[0].split("reaches ")[1].split(" mm")[0]) == pytest.approx(32.0 - 24.0, abs=0.1)
+    res = planning.export_rtstruct(str(tmp_path / "in.dcm"), str(tmp_path / "ct"), [("Bolus", *SPHERE)])
+    assert not [w for w in res["warnings"] if "beyond the CT" in w], res["warnings"]
+
+
 def test_oblique_ct_sections_lie_on_its_planes(tmp_path):
     a = np.radians(15.0)
     _ct(tmp_path / "ct", row_cos=np.array([np.cos(a), np.sin(a), 0.0]), col_cos=np.array([0.0, 0.0, -1.0]))
