@@ -13,7 +13,10 @@ midpoint 1->4 subdivision does not move the surface):
 * ``10k``: the 70k mesh, the edge-connected crop of about 10,000 triangles nearest the nose tip
   (the vertex of largest z);
 * ``100k``: the mesh subdivided once (280k), the crop of about 100,000 triangles around the nose tip;
-* ``1M``: the whole bust subdivided twice (1,120,000 triangles, closed).
+* ``1M``: the whole bust subdivided twice (1,120,000 triangles, closed);
+* ``1.4M``: a scan-like head: the ``1M`` mesh with ``BISECTIONS`` random edges split at their midpoints
+  (no two in one triangle: irregular triangles, 1,400,000 in all) and every vertex moved along its normal
+  by Gaussian noise of ``NOISE_MM`` (seed 0).  Run only when named in ``--sizes``.
 
 Steps (each (step, size) in a fresh child process of its own, ``--worker``: its peak memory is its own;
 the mesh is built once by the parent and handed over as a .npz file):
@@ -23,6 +26,10 @@ the mesh is built once by the parent and handed over as a .npz file):
   size mesh, given the preview's result (computed first, untimed, as the add-on's segment operator reuses the
   last preview of the same region and smoothing);
 * ``segment_alone`` (only when asked with ``--steps``): the same without the preview, i.e. computing it;
+* ``segment_exact`` (only when asked): ``segment`` with the eigenvectors of the full problem (shift-invert
+  Lanczos on the whole Laplacian, no coarse level) and k-means on every row: the reference the patches of
+  ``segment`` are compared with (triangles in the same patch after matching the labels, each patch's
+  sum varpi, and how far each border of ``segment`` lies from the reference's borders, in mm);
 * ``cuts``: ``cutlines.smooth_cuts`` on a crop of n/5 triangles of the same density (200k at 1M), its
   labels from ``spectral.segment(.., 3)`` of that crop first (not timed, its memory peak reset);
 * ``unfold``: ``unfold.unfold_patch(V, F)`` (defaults) on a crop of n/20 triangles (50k at 1M);
@@ -51,16 +58,20 @@ from pathlib import Path
 import benchutil
 from benchutil import data_mesh, Table
 
-SIZES = {"10k": (0, 10_000), "100k": (1, 100_000), "1M": (2, None)}  # (times subdivided, crop to n faces)
+#: (times subdivided, crop to n faces, edges bisected with noise)
+SIZES = {"10k": (0, 10_000, 0), "100k": (1, 100_000, 0), "1M": (2, None, 0), "1.4M": (2, None, 140_000)}
+DEFAULT_SIZES = ("10k", "100k", "1M")
 QUICK_SIZES = ("10k", "100k")
+BISECTIONS, NOISE_MM = 140_000, 0.05
 STEPS = ("preview", "segment", "cuts", "unfold", "shell", "orient")
-EXTRA_STEPS = ("segment_alone",)  # run only when named in --steps
+EXTRA_STEPS = ("segment_alone", "segment_exact")  # run only when named in --steps
 CUT_SHARE, UNFOLD_SHARE = 5, 20  # regions of n/5 and n/20 triangles
 FACE_RADIUS_MM = 100.0
 SMOOTHING_MM, PATCHES, ETA = 3.0, 3, 5.0
 SHELL_T_MM, SHELL_RES_MM = 10.0, 1.0
 SUPERLINEAR = 1.3
 TARGET_S, TARGET_MB = 60.0, 2048.0
+TARGET14_S, TARGET14_MB = 30.0, 1536.0  #: 1.4M faces: preview + segment, and the larger memory growth
 TIMEOUT_S = 420
 SECTION = "## Scale: 10k to 1M faces (`bench/scale_bench.py`)"
 
@@ -85,6 +96,40 @@ def outward(V, F, inside):
     return _outward(V, F, inside)[0]
 
 
+def bisect_edges(V, F, count: int, noise_mm: float, seed: int = 0):
+    """Split ``count`` random interior edges at their midpoints, no two in one triangle (each split turns
+    its two triangles into four), then move every vertex along its normal by N(0, noise_mm)."""
+    import numpy as np
+
+    from bolus_addon.core.mesh.topology import MeshTopology
+
+    rng = np.random.default_rng(seed)
+    topo = MeshTopology(V, F)
+    ef = topo.edge_faces  # (e, 2), -1 on the border
+    cand = rng.permutation(np.flatnonzero((ef >= 0).all(axis=1)))
+    first = np.full(len(F), len(cand))
+    for side in (0, 1):  # an edge is taken when it comes first in both of its triangles
+        np.minimum.at(first, ef[cand, side], np.arange(len(cand)))
+    pos = np.arange(len(cand))
+    take = cand[(first[ef[cand, 0]] == pos) & (first[ef[cand, 1]] == pos)][:count]
+    E = topo.edges[take]
+    mid = len(V) + np.arange(len(take))
+    V2 = np.vstack([V, 0.5 * (V[E[:, 0]] + V[E[:, 1]])])
+    keep = np.ones(len(F), dtype=bool)
+    new = []
+    for side in (0, 1):
+        f = ef[take, side]
+        keep[f] = False
+        tri = F[f]
+        # turn each triangle (keeping its orientation) so that its corner off the edge comes last
+        off = np.argmin((tri == E[:, :1]) | (tri == E[:, 1:]), axis=1)
+        tri = np.take_along_axis(tri, (off[:, None] + np.arange(1, 4)) % 3, axis=1)
+        new += [np.c_[tri[:, 0], mid, tri[:, 2]], np.c_[mid, tri[:, 1], tri[:, 2]]]
+    F2 = np.vstack([F[keep]] + new)
+    N = MeshTopology(V2, F2).vertex_normals
+    return V2 + N * rng.normal(0.0, noise_mm, (len(V2), 1)), F2
+
+
 def build_inputs(sizes, steps, folder: Path) -> dict:
     """Write the input .npz of every (step, size) to folder -> {(step, size): (path, faces, how)}."""
     import numpy as np
@@ -98,17 +143,20 @@ def build_inputs(sizes, steps, folder: Path) -> dict:
     levels = {0: (V0, F0)}
     out = {}
     for size in sizes:
-        level, n = SIZES[size]
+        level, n, cuts = SIZES[size]
         while level not in levels:
             k = max(levels)
             levels[k + 1] = midpoint_subdivide(*levels[k])
         VL, FL = levels[level]
+        if cuts:
+            VL, FL = bisect_edges(VL, FL, cuts, NOISE_MM)
         Vs, Fs = (VL, FL) if n is None else crop(VL, FL, tip, n)
         n_size = len(Fs)
-        how_size = f"nefertiti x{4 ** level} ({len(FL)} tri)" + ("" if n is None else f", crop {n_size} tri")
+        how_size = f"nefertiti x{4 ** level} ({len(FL)} tri)" + ("" if n is None else f", crop {n_size} tri") + (
+            f" with {cuts} edges bisected and {NOISE_MM:g} mm noise" if cuts else "")
         out[("size", size)] = (None, n_size, how_size)
         for step in steps:
-            if step in ("preview", "segment", "segment_alone"):
+            if step in ("preview", "segment", "segment_alone", "segment_exact"):
                 V, F, how = Vs, Fs, how_size
             elif step in ("cuts", "orient"):
                 V, F = crop(VL, FL, tip, n_size // CUT_SHARE)
@@ -154,6 +202,13 @@ def worker(step: str, path: str) -> dict:
                                         analysis=ana)
     elif step == "segment_alone":
         call = lambda: spectral.segment(V, F, PATCHES, eta=ETA, smoothing_mm=SMOOTHING_MM, rng=0)  # noqa: E731
+    elif step == "segment_exact":
+        from bolus_addon.core.analysis import clustering
+
+        spectral.MULTILEVEL_MIN_VERTICES, clustering.KMEANS_SAMPLE = 10**12, 10**12
+        ana = saliency.analyse(V, F, SMOOTHING_MM)
+        call = lambda: spectral.segment(V, F, PATCHES, eta=ETA, smoothing_mm=SMOOTHING_MM, rng=0,  # noqa: E731
+                                        analysis=ana)
     elif step == "cuts":
         labels = spectral.segment(V, F, PATCHES, eta=ETA, smoothing_mm=SMOOTHING_MM, rng=0).face_labels
         call = lambda: cutlines.smooth_cuts(V, F, labels)  # noqa: E731
@@ -172,8 +227,10 @@ def worker(step: str, path: str) -> dict:
     res = call()
     dt = time.perf_counter() - t0
     peak = benchutil.status_kb("VmHWM")
-    if step in ("segment", "segment_alone"):
+    if step in ("segment", "segment_alone", "segment_exact"):
         note = f"{len(np.unique(res.face_labels))} patches"
+        np.savez(str(path) + ".labels.npz", labels=res.face_labels,
+                 varpi=np.array([p.sum_varpi for p in res.patches]))
     elif step == "cuts":
         note = f"{len(res.F)} tri out"
     elif step == "unfold":
@@ -237,13 +294,61 @@ def tables(results: dict, sizes, steps):
     return t, flags
 
 
+def compare_exact(path, ours_file, exact_file) -> dict:
+    """The patches of ``segment`` against ``segment_exact`` on the same mesh (module doc)."""
+    import numpy as np
+    from scipy.optimize import linear_sum_assignment
+    from scipy.spatial import cKDTree
+
+    from bolus_addon.core.mesh.topology import MeshTopology
+
+    d = np.load(path)
+    topo = MeshTopology(d["V"], d["F"])
+    a, b = np.load(ours_file), np.load(exact_file)
+    la, lb = a["labels"], b["labels"]
+    overlap = np.zeros((la.max() + 1, lb.max() + 1))
+    np.add.at(overlap, (la, lb), topo.areas)
+    ra, rb = linear_sum_assignment(-overlap)
+    same = float(overlap[ra, rb].sum() / topo.areas.sum())
+    dv = np.abs(a["varpi"][ra] - b["varpi"][rb]) / np.maximum(np.abs(b["varpi"][rb]), 1e-9)
+    ef = topo.edge_faces
+    inner = (ef >= 0).all(axis=1)
+    mids = topo.V[topo.edges].mean(axis=1)
+
+    def border(lab):
+        return mids[inner & (lab[np.maximum(ef[:, 0], 0)] != lab[np.maximum(ef[:, 1], 0)])]
+
+    ba, bb = border(la), border(lb)
+    far = cKDTree(bb).query(ba)[0] if len(ba) and len(bb) else np.zeros(1)
+    return {"patches": [int(la.max() + 1), int(lb.max() + 1)], "same_area": same,
+            "varpi_change_max": float(dv.max()) if len(dv) else 0.0,
+            "border_p50_mm": float(np.percentile(far, 50)), "border_p95_mm": float(np.percentile(far, 95)),
+            "border_max_mm": float(far.max())}
+
+
+def exact_text(cmp: dict) -> str:
+    return "; ".join(
+        f"{size}: {c['patches'][0]} / {c['patches'][1]} patches, {100 * c['same_area']:.2f} % of the area in the "
+        f"same patch, largest change of a patch's sum varpi {100 * c['varpi_change_max']:.2f} % (target 5 %), "
+        f"border of segment from the reference's: median {c['border_p50_mm']:.2f} mm, p95 {c['border_p95_mm']:.2f} "
+        f"mm, max {c['border_max_mm']:.1f} mm" for size, c in cmp.items())
+
+
 def verdict(results: dict) -> str:
+    p, s = results.get(("preview", "1.4M")), results.get(("segment", "1.4M"))
+    if p and s and "seconds" in p and "seconds" in s:
+        tot, grow = p["seconds"] + s["seconds"], max(p["delta_mb"], s["delta_mb"])
+        head = (f"1.4M target: preview {p['seconds']:.1f} s + segment {s['seconds']:.1f} s = {tot:.1f} s (target <= "
+                f"{TARGET14_S:g} s: {'MET' if tot <= TARGET14_S else 'NOT MET'}); largest growth of one of them "
+                f"{grow:.0f} MB (target <= {TARGET14_MB:g} MB: {'MET' if grow <= TARGET14_MB else 'NOT MET'}). ")
+    else:
+        head = ""
     p, s = results.get(("preview", "1M")), results.get(("segment", "1M"))
     if not p or not s or "seconds" not in p or "seconds" not in s:
-        return "1M yardstick: not measured (preview or segment at 1M did not run)."
+        return head + "1M yardstick: not measured (preview or segment at 1M did not run)."
     tot = p["seconds"] + s["seconds"]
     mem = max(r["peak_mb"] for (st, sz), r in results.items() if sz == "1M" and "peak_mb" in r)
-    return (f"1M yardstick: preview {p['seconds']:.1f} s + segment {s['seconds']:.1f} s = {tot:.1f} s "
+    return head + (f"1M yardstick: preview {p['seconds']:.1f} s + segment {s['seconds']:.1f} s = {tot:.1f} s "
             f"(target <= {TARGET_S:g} s: {'MET' if tot <= TARGET_S else 'NOT MET'}); largest peak of a 1M-size step "
             f"{mem:.0f} MB (target < {TARGET_MB:g} MB: {'MET' if mem < TARGET_MB else 'NOT MET'}). "
             "Before the coarse-to-fine eigenvectors and the reused preview: 1.43M faces, 37-40 s preview, 104-106 s segment, +1.5-1.6 GB; 2026-12-02 05:10 (before "
@@ -295,12 +400,12 @@ def main(argv=None) -> int:
         print("RESULT " + json.dumps(worker(argv[1], argv[2])), flush=True)
         return 0
     ap = benchutil.parser(__doc__, "10k and 100k only", repeat=None)
-    ap.add_argument("--sizes", nargs="+", choices=list(SIZES), help="sizes to run (default all, --quick 10k 100k)")
+    ap.add_argument("--sizes", nargs="+", choices=list(SIZES), help="sizes to run (default 10k 100k 1M, --quick 10k 100k; 1.4M only when named)")
     ap.add_argument("--steps", nargs="+", choices=STEPS + EXTRA_STEPS, default=list(STEPS),
                     help="steps to run (default all but segment_alone)")
     ap.add_argument("--timeout", type=float, default=TIMEOUT_S, help=f"seconds per (step, size) (default {TIMEOUT_S})")
     args = ap.parse_args(argv)
-    sizes = args.sizes or (list(QUICK_SIZES) if args.quick else list(SIZES))
+    sizes = args.sizes or list(QUICK_SIZES if args.quick else DEFAULT_SIZES)
     sizes = [s for s in SIZES if s in sizes]
     steps = [s for s in STEPS + EXTRA_STEPS if s in args.steps]
     t_start = time.perf_counter()
@@ -320,15 +425,20 @@ def main(argv=None) -> int:
                 print("   " + (f"ERROR {r['error']}" if "error" in r else
                                f"{r['seconds']:.2f} s, peak {r['peak_mb']:.0f} MB (+{r['delta_mb']:.0f}) {r['note']}"),
                       flush=True)
+        cmp = {size: compare_exact(inputs[("segment", size)][0], str(inputs[("segment", size)][0]) + ".labels.npz",
+                                   str(inputs[("segment_exact", size)][0]) + ".labels.npz")
+               for size in sizes if "seconds" in results.get(("segment", size), {})
+               and "seconds" in results.get(("segment_exact", size), {})}
     t, flags = tables(results, sizes, steps)
-    v = verdict(results)
+    v = verdict(results) + (("\n\nsegment against segment_exact (the full eigen-solve): " + exact_text(cmp) + ".")
+                            if cmp else "")
     print("\n" + legend() + ".\n" + t.text() + "\n" + v)
     print("super-linear: " + (", ".join(flags) if flags else "none"))
     total = time.perf_counter() - t_start
     print(f"total bench time {total:.1f} s")
     if args.json:
         benchutil.write_json(args.json, {"results": [{"step": a, "size": b, **r} for (a, b), r in results.items()],
-                                         "verdict": v, "superlinear": flags, "total_s": total})
+                                         "verdict": v, "superlinear": flags, "total_s": total, "exact": cmp})
     if args.markdown:
         replace_section(args.markdown, markdown(t, flags, v, hows, argv) + f"\n\n_Whole script: {total:.0f} s._\n")
     return 0

@@ -9,6 +9,10 @@ Other modules of the Blender layer call these helpers instead of testing
   ``export_mesh.stl`` add-on only on builds that still carry it);
 - `uv_unwrap_methods` / `has_uv_unwrap_method`: ``uv.unwrap`` gained ``MINIMUM_STRETCH``
   (SLIM) in 4.3 (the benchmarks compare the unfolding with it);
+- `native_attribute`: the mesh's own attribute behind an RNA collection property
+  (``vertices.co`` is ``position``, ``loops.vertex_index`` is ``.corner_vert``, ...): read
+  through it with its own dtype, ``foreach_get`` is one copy instead of an RNA access per
+  element (70k triangles: 0.1 ms against 20-30 ms per array, on 4.2 to 5.2 alike);
 - `version`, `at_least`: the running Blender as a tuple, for anything new.
 
 Not a switch here because it is solved the same way on every version: the corners of
@@ -20,7 +24,7 @@ from __future__ import annotations
 
 import bpy
 
-__all__ = ["version", "at_least", "stl_export", "uv_unwrap_methods", "has_uv_unwrap_method"]
+__all__ = ["version", "at_least", "stl_export", "uv_unwrap_methods", "has_uv_unwrap_method", "native_attribute"]
 
 
 def version() -> tuple[int, int, int]:
@@ -31,6 +35,37 @@ def version() -> tuple[int, int, int]:
 def at_least(major: int, minor: int = 0, patch: int = 0) -> bool:
     """True when the running Blender is ``major.minor.patch`` or newer."""
     return version() >= (major, minor, patch)
+
+
+#: (collection type, property) -> (attribute names, newest first; its data key; its stored dtype)
+_NATIVE = {
+    ("MeshVertices", "co"): (("position",), "vector", "float32"),
+    ("MeshLoops", "vertex_index"): ((".corner_vert",), "value", "int32"),
+    ("MeshLoops", "edge_index"): ((".corner_edge",), "value", "int32"),
+    ("MeshEdges", "vertices"): ((".edge_verts",), "value", "int32"),
+    ("MeshEdges", "use_seam"): (("uv_seam", ".uv_seam"), "value", "bool"),
+    ("MeshPolygons", "select"): ((".select_poly", "select_poly"), "value", "bool"),
+}
+
+
+def native_attribute(coll, prop: str, size: int):
+    """(attribute data, key, dtype name) holding ``coll.prop`` for ``size`` scalars, or None.
+
+    None when the mesh does not store it as an attribute (an unset seam or selection
+    layer, a collection not in the table): the caller reads the RNA property instead.
+    """
+    kind = getattr(getattr(coll, "bl_rna", None), "identifier", None)  # None on an attribute's own data
+    entry = _NATIVE.get((kind, prop))
+    if entry is None:
+        return None
+    names, key, dtype = entry
+    attrs = coll.id_data.attributes
+    for name in names:
+        attr = attrs.get(name)
+        if attr is not None:
+            width = {"vector": 3}.get(key, 2 if attr.data_type == "INT32_2D" else 1)
+            return (attr.data, key, dtype) if len(attr.data) * width == size else None
+    return None
 
 
 def stl_export(path: str, mm_per_unit: float) -> None:

@@ -15,6 +15,7 @@ import bpy
 import numpy as np
 
 from ..core.errors import BolusError
+from . import compat
 from ..core.mesh.remesh_maps import label_range
 
 __all__ = ["mm_per_unit", "world_mm", "get_array", "active_mesh_object", "read_face_labels", "object_mode",
@@ -39,9 +40,18 @@ def world_mm(co: np.ndarray, obj: bpy.types.Object, mm: float) -> np.ndarray:
 
 
 def get_array(coll, attr: str, n: int, dtype, width: int = 1) -> np.ndarray:
-    """A copy of ``coll``'s ``attr`` for its n elements: (n,) or (n, width) of ``dtype``."""
-    out = np.empty(n * width, dtype=dtype)
-    coll.foreach_get(attr, out)
+    """A copy of ``coll``'s ``attr`` for its n elements: (n,) or (n, width) of ``dtype``.
+
+    Through the mesh's own attribute where there is one (`compat.native_attribute`)."""
+    native = compat.native_attribute(coll, attr, n * width)
+    if native is not None:
+        data, key, stored = native
+        raw = np.empty(n * width, dtype=stored)
+        data.foreach_get(key, raw)
+        out = raw.astype(dtype, copy=False)
+    else:
+        out = np.empty(n * width, dtype=dtype)
+        coll.foreach_get(attr, out)
     return out.reshape(-1, width) if width > 1 else out
 
 
@@ -162,11 +172,9 @@ def set_seams(me: bpy.types.Mesh, seam: np.ndarray, touched: np.ndarray) -> None
 
 def polygon_corners(me: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(loop_start (P,), loop_total (P,), loop vertex (L,)) of a mesh's polygons."""
-    out = [np.empty(n, dtype=np.int64) for n in (len(me.polygons), len(me.polygons), len(me.loops))]
-    me.polygons.foreach_get("loop_start", out[0])
-    me.polygons.foreach_get("loop_total", out[1])
-    me.loops.foreach_get("vertex_index", out[2])
-    return out[0], out[1], out[2]
+    npoly = len(me.polygons)
+    return (get_array(me.polygons, "loop_start", npoly, np.int64), get_array(me.polygons, "loop_total", npoly, np.int64),
+            get_array(me.loops, "vertex_index", len(me.loops), np.int64))
 
 
 def new_mesh(name: str, co: np.ndarray, corner_vert: np.ndarray, loop_starts: np.ndarray) -> bpy.types.Mesh:

@@ -21,11 +21,12 @@ both values give the same labels on the scaled embedding (the README's figures).
 from __future__ import annotations
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..errors import BolusError
 from ..rng import as_rng
 
-__all__ = ["METHODS", "REG_COVAR", "KMEANS_RESTARTS", "GMM_RESTARTS", "WEIGHTED_DRAWS", "standardise_rows",
+__all__ = ["METHODS", "REG_COVAR", "KMEANS_RESTARTS", "KMEANS_THREADS", "GMM_RESTARTS", "WEIGHTED_DRAWS", "standardise_rows",
            "cluster_rows"]
 
 METHODS = ("kmeans", "gmm")
@@ -35,6 +36,10 @@ KMEANS_RESTARTS = 4  #: k-means++ restarts: the best of 4 was stable on every te
 #: Lloyd's iterations from the best centres then run on every row (nefertiti, 35k vertices:
 #: 0.36 s -> 0.06 s, the same patches on 99.9 % of the triangles, as a second seed gives)
 KMEANS_SAMPLE = 12_000
+#: OpenMP/BLAS threads of k-means: at a few columns and up to a million rows a Lloyd pass is
+#: memory-bound, and on a 2-core machine with other work running two threads waited on each
+#: other (12k rows, k = 3, 4 restarts: 0.04-0.15 s on one thread, 0.08-0.90 s on two)
+KMEANS_THREADS = 1
 GMM_RESTARTS = 3  #: mixture restarts: the best likelihood of 3 was stable on every test mesh
 WEIGHTED_DRAWS = (4096, 50_000)  #: area-weighted resample for the mixture: max(rows, 4096), at most 50,000
 
@@ -86,11 +91,13 @@ def cluster_rows(U, k: int, method: str = "kmeans", rng=None, weights=None) -> n
         sw = None if w is None else w * n
         if n > KMEANS_SAMPLE and w is None:
             pick = np.random.default_rng(seed).choice(n, KMEANS_SAMPLE, replace=False)
-            centres = KMeans(n_clusters=k, n_init=KMEANS_RESTARTS, random_state=seed).fit(X[pick]).cluster_centers_
+            with threadpool_limits(KMEANS_THREADS):
+                centres = KMeans(n_clusters=k, n_init=KMEANS_RESTARTS, random_state=seed).fit(X[pick]).cluster_centers_
             km = KMeans(n_clusters=k, init=centres, n_init=1, random_state=seed)
         else:
             km = KMeans(n_clusters=k, n_init=KMEANS_RESTARTS, random_state=seed)
-        return km.fit_predict(X, sample_weight=sw).astype(np.int64)
+        with threadpool_limits(KMEANS_THREADS):
+            return km.fit_predict(X, sample_weight=sw).astype(np.int64)
     fit_rows = X
     if w is not None:
         draws = int(min(max(n, WEIGHTED_DRAWS[0]), WEIGHTED_DRAWS[1]))
