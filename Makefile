@@ -101,7 +101,7 @@ BENCH_MD ?= docs/benchmarks.md
 BENCH_ARGS ?=
 bench: $(VENV)/.installed
 	$(PY) bench/benchutil.py --header $(BENCH_MD)
-	@rc=0; for b in segment_bench unfold_bench cuts_bench print_bench learned_print_bench retrieval_bench shell_bench flatten_bench scale_bench rangescan_bench dicom_bench; do \
+	@rc=0; for b in segment_bench unfold_bench whole_face_bench cuts_bench print_bench learned_print_bench retrieval_bench shell_bench flatten_bench scale_bench rangescan_bench dicom_bench; do \
 	  echo "== bench/$$b.py"; $(PY) bench/$$b.py --markdown $(BENCH_MD) $(BENCH_ARGS) || rc=1; \
 	done; \
 	echo "== bench/rangescan_bench.py --head1m"; $(PY) bench/rangescan_bench.py --head1m --markdown $(BENCH_MD) $(BENCH_ARGS) || rc=1; \

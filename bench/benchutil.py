@@ -17,6 +17,7 @@ import gc
 import json
 import os
 import platform
+import re
 import resource
 import subprocess
 import sys
@@ -155,6 +156,22 @@ def append_markdown(path, text: str) -> None:
     with out.open("a", encoding="utf-8") as fh:
         fh.write("\n" + text.strip("\n") + "\n")
     print(f"tables appended to {out}")
+
+
+def replace_section(path, section: str, text: str) -> None:
+    """Replace the section headed ``section`` of the markdown file (up to the next '## ' heading)
+    with text, or append text when the file has no such section."""
+    p = Path(path)
+    old = p.read_text(encoding="utf-8") if p.exists() else ""
+    body = text.strip("\n") + "\n"
+    i = old.find(section)
+    if i < 0:
+        append_markdown(path, text)
+        return
+    m = re.search(r"^## ", old[i + len(section):], flags=re.M)
+    j = len(old) if m is None else i + len(section) + m.start()
+    p.write_text(old[:i] + body + ("\n" + old[j:] if j < len(old) else ""), encoding="utf-8")
+    print(f"section replaced in {p}")
 
 
 def run_line(script: str, argv) -> str:

@@ -515,20 +515,6 @@ def tables(results: dict) -> tuple[str, str]:
     return t.text("   "), t.markdown()
 
 
-def replace_section(path: str, text: str, section: str = SECTION) -> None:
-    """Replace this script's section of the markdown file (from its heading to the next '## '), or append it."""
-    out = Path(path)
-    old = out.read_text(encoding="utf-8") if out.exists() else ""
-    start = old.find(section)
-    if start < 0:
-        benchutil.append_markdown(path, text)
-        return
-    nxt = old.find("\n## ", start + len(section))
-    new = old[:start] + text.strip("\n") + "\n" + (old[nxt:] if nxt >= 0 else "")
-    out.write_text(new, encoding="utf-8")
-    print(f"section replaced in {out}")
-
-
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["--worker"]:
@@ -592,7 +578,7 @@ def main(argv=None) -> int:
                     f"one process running the chain on the treatment area.")
         body = (f"{section}\n\n{benchutil.run_line('rangescan_bench.py', argv)}\n\n{what} Target: each finishes "
                 f"or refuses within {TARGET_S:.0f} s.\n\n{md}\n\n_Whole script: {total:.0f} s._\n")
-        replace_section(args.markdown, body, section)
+        benchutil.replace_section(args.markdown, section, body)
     print(f"total bench time {total:.1f} s")
     if args.json:
         benchutil.write_json(args.json, {**payload, "total_s": total})

@@ -48,7 +48,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 import subprocess
 import sys
 import tempfile
@@ -379,21 +378,6 @@ def markdown(t: Table, flags, verdict_text: str, hows: dict, argv) -> str:
     return "\n".join(out)
 
 
-def replace_section(path, text: str) -> None:
-    """Replace this script's section of the markdown file (up to the next '## ' heading), or append it."""
-    p = Path(path)
-    old = p.read_text(encoding="utf-8") if p.exists() else ""
-    body = text.strip("\n") + "\n"
-    i = old.find(SECTION)
-    if i < 0:
-        benchutil.append_markdown(path, text)
-        return
-    m = re.search(r"^## ", old[i + len(SECTION):], flags=re.M)
-    j = len(old) if m is None else i + len(SECTION) + m.start()
-    p.write_text(old[:i] + body + ("\n" + old[j:] if j < len(old) else ""), encoding="utf-8")
-    print(f"section replaced in {p}")
-
-
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["--worker"]:
@@ -440,7 +424,7 @@ def main(argv=None) -> int:
         benchutil.write_json(args.json, {"results": [{"step": a, "size": b, **r} for (a, b), r in results.items()],
                                          "verdict": v, "superlinear": flags, "total_s": total, "exact": cmp})
     if args.markdown:
-        replace_section(args.markdown, markdown(t, flags, v, hows, argv) + f"\n\n_Whole script: {total:.0f} s._\n")
+        benchutil.replace_section(args.markdown, SECTION, markdown(t, flags, v, hows, argv) + f"\n\n_Whole script: {total:.0f} s._\n")
     return 0
 
 

@@ -10,6 +10,10 @@ refined by the sign of the angle defect 2 pi - theta (eq. 4-1) diffused at the a
   sides separate pieces (`SPLIT_DEPTH`, `MIN_SPLIT_SHARE`, `MIN_PIECE_TRIANGLES`);
 * a dome that no dart helped is split through its deficit points.
 
+A patch of `part_split.PART_MIN_TRIANGLES` or more is first cut into spectral parts by its angle
+defect (`part_split`: a whole face left in one patch), each part then refined as above (so
+``max_pieces`` and `MAX_DARTS` count per part) and cut again where it still misses.
+
 `sheet_pieces` judges every piece from its angle sums (`EL_PER_RAD`, `EL_HIGH_PER_RAD`) or a cheap
 trial (`TRIAL_ITERS`, `TRIAL_SLACK`); a piece misses when EL > max_el, EA > `EA_PER_EL` max_el or
 a triangle is flipped or overlapping.  The worst piece is refined first, with the first candidate
@@ -20,6 +24,7 @@ Design notes: docs/design/unfold.md.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -32,6 +37,7 @@ from ..errors import BolusError
 from .initial_unfolding import conformal_unfolding
 from .measures import length_area_errors
 from .overlap import signed_areas
+from . import part_split
 from .piece_advice import EXCESS_SHARE, diffused_defect
 from .refine import refine_lengths_l1
 from .relax import relax_lbfgs
@@ -363,7 +369,8 @@ def sheet_pieces(V, F, max_el: float = 0.02, *, max_pieces: int = MAX_PIECES, si
     V : (n,3) float mm; F : (m,3) int, one consistently oriented patch.
     max_el : the EL target as a fraction (0.02 = 2 %; EA target `EA_PER_EL` x max_el);
         0 = refinement off: one piece, exactly ``unfold_patch(V, F, method, refine_rounds)``.
-    max_pieces : pieces at most (splits stop there; darts: `MAX_DARTS` per piece).
+    max_pieces : pieces at most (splits stop there; darts: `MAX_DARTS` per piece); per spectral
+        part on a patch that is cut into parts first (module doc).
     sigma_mm : scale of the diffused angle defect (`piece_advice`) choosing dart or split.
     method, refine_rounds : passed to `unfold.unfold_patch` for each final piece.
     progress : progress(fraction in [0, 1], text) about every 0.5 s ("dart 2 on piece 1", ...).
@@ -401,9 +408,18 @@ def sheet_pieces(V, F, max_el: float = 0.02, *, max_pieces: int = MAX_PIECES, si
     check_mesh(V, F, "the patch", nondegenerate=True, manifold=True)
     _check_winding(F)
     groups = _check_groups(face_groups, len(F))
-    run = _Run(V, F, max_el, int(max_pieces), float(sigma_mm), method, refine_rounds, progress, groups)
-    run.run()
-    return run.result(t0)
+
+    def solve(Vp, Fp, gp, pr):
+        t_part = time.perf_counter()
+        run = _Run(Vp, Fp, max_el, int(max_pieces), float(sigma_mm), method, refine_rounds, pr, gp)
+        run.run()
+        return run.result(t_part)
+
+    parts = part_split.part_labels(V, F, None, float(sigma_mm), face_groups=groups)
+    if parts is None:
+        return dataclasses.replace(solve(V, F, groups, progress), seconds=time.perf_counter() - t0)
+    found = part_split.solve_in_parts(V, F, parts, solve, float(sigma_mm), groups, progress)
+    return part_split.merge_parts(V, F, found, time.perf_counter() - t0)
 
 
 def _check_groups(face_groups, m: int) -> np.ndarray | None:
