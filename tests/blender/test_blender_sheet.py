@@ -253,3 +253,32 @@ def test_export_bad_path_writes_nothing(bpy_addon, scene, tmp_path, name, match)
     with pytest.raises(RuntimeError, match=match):
         bpy.ops.bolus.export_pattern(filepath=str(tmp_path / name))
     assert list(tmp_path.iterdir()) == []
+
+
+# =========================================================================== a whole face in one patch
+def test_a_whole_face_in_one_patch_is_cut_into_parts_and_every_polygon_stays_whole(bpy_addon, scene, capfd):
+    """The ICT face with its eye holes and nostril pockets, never segmented (13,120 triangles of
+    quads): Unfold with the default Max EL cuts it into spectral parts, then darts and splits; no
+    quad is torn between two pieces, even where a part with a hole was cut to a disk along a
+    quad's diagonal, and the source is untouched."""
+    from bpy_helpers import import_obj
+    from paths import data_mesh
+
+    bpy = bpy_addon
+    src = import_obj(bpy, data_mesh("ict_face_narrow.obj"), 0.01)
+    before = object_snapshot(src)
+    assert bpy.ops.bolus.unfold(max_el=2.0) == {"FINISHED"}
+    out = reports(capfd)
+    pat = pattern_of(bpy, src)
+    piece = check_pieces_cover_source_once(bpy, src, pat)  # every source polygon in exactly one piece
+    t = table_of(pat)
+    assert t["pieces"] == piece.max() + 1 >= 10 and t["splits"] >= t["pieces"] - 1
+    m = spec_measure(bpy, src, pat)
+    fan_piece = np.repeat(piece, [len(p.vertices) - 2 for p in pat.data.polygons])
+    els = [np.abs(m["L"][fan_piece == k] - m["L0"][fan_piece == k]).sum() / m["L0"][fan_piece == k].sum()
+           for k in np.unique(piece)]
+    assert np.median(els) <= 0.02 and max(els) <= 0.03, els  # measured as SPEC says, per piece
+    for row in t["islands"]:  # a piece that is not fit to cut is named in a warning with its figures
+        if row["EL"] > 0.03 or row["EA"] > 0.03 or row["flipped"] or row["overlaps"]:
+            assert f"{row['name'][0].upper()}{row['name'][1:]}: EL {100 * row['EL']:.1f} %" in out
+    assert_same_object(before, object_snapshot(src))

@@ -74,10 +74,12 @@ class _Mesh:
     cut: str = ""  # how a piece with a hole was cut to a disk ("" if it was one)
     disk_edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int64))  # those cuts (V ids)
     locked: np.ndarray | None = None  # (e,) bool, edges of topo inside one face group (a quad's diagonal)
+    groups: np.ndarray | None = None  # (f,) the face group of every row of Fc
 
     def with_groups(self, groups: np.ndarray | None) -> "_Mesh":
         """Lock the edges whose two triangles have the same group (groups (f,) per row of Fc,
         e.g. the source polygon of every triangle): no dart or split runs along them."""
+        self.groups = groups
         if groups is not None:
             ef = self.topo.edge_faces
             both = (ef >= 0).all(axis=1)
@@ -284,8 +286,14 @@ def _split_faces(mesh: _Mesh, path: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     q = _edge_keys(np.stack([path[:-1], path[1:]], 1), n)
     eid = np.searchsorted(keys, q)
     P, e = topo.face_adjacency_pairs, topo.face_adjacency_edges
-    keep = ~np.isin(e, eid)
-    G = sp.coo_matrix((np.ones(int(keep.sum())), (P[keep, 0], P[keep, 1])), shape=(topo.m, topo.m))
+    P = P[~np.isin(e, eid)]
+    if mesh.groups is not None:
+        # the triangles of one source polygon stay on one side even where the cut to a disk
+        # opened the polygon's diagonal (they are then no longer neighbours in topo)
+        _, first = np.unique(mesh.groups, return_index=True)
+        lead = first[np.searchsorted(np.unique(mesh.groups), mesh.groups)]
+        P = np.r_[P, np.c_[np.arange(topo.m), lead]]
+    G = sp.coo_matrix((np.ones(len(P)), (P[:, 0], P[:, 1])), shape=(topo.m, topo.m))
     ncomp, comp = connected_components(G, directed=False)
     if ncomp != 2:
         return None
