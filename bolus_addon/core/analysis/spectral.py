@@ -74,6 +74,12 @@ HIGH_SALIENCY = 0.25
 #: the same patches on 99.99 % of the triangles.  Below it (a nose region, the small
 #: test meshes) the exact shift-invert path is as fast and is kept.
 MULTILEVEL_MIN_VERTICES = 20_000
+#: ... and only for at most this many eigenvectors up to EXACT_MAX_VERTICES: LOBPCG's block
+#: work grows with k^2, and at k = 13 the exact path was faster at every size measured
+#: (eta 5, 3 mm, best of 2 at load 4-5: 21.7k vertices 1.5 s against 3.5 s, 35k 2.8 s against
+#: 6.2 s, 140k 10.2 s against 16.9 s; at k = 3 coarse to fine stays faster, 0.67 / 1.19 s at 35k)
+MULTILEVEL_MAX_K = 8
+EXACT_MAX_VERTICES = 200_000
 D_CLIP = 3.0  #: distances clipped at 3 sigma: every edge weight >= exp(-4.5) ~ 0.011 (see `gaussian_weights`)
 
 
@@ -147,7 +153,8 @@ def smallest_eigenvectors(L: sp.spmatrix, k: int, rng=None, coords: np.ndarray |
     with its sign fixed (largest-magnitude entry positive) for reproducibility.
     coords (n,3), optional: vertex positions; with them a graph Laplacian of more than
     ``MULTILEVEL_MIN_VERTICES`` vertices is solved coarse to fine
-    (`multilevel_eigenvectors`, L must then be a connected graph Laplacian).
+    (`multilevel_eigenvectors`, L must then be a connected graph Laplacian), for k up to
+    ``MULTILEVEL_MAX_K`` (any k below 20 above ``EXACT_MAX_VERTICES`` vertices).
     """
     n = L.shape[0]
     if k < 1 or k > n:
@@ -156,7 +163,8 @@ def smallest_eigenvectors(L: sp.spmatrix, k: int, rng=None, coords: np.ndarray |
     if n <= max(300, 4 * k):
         vals, vecs = eigh(L.toarray())
         vals, vecs = vals[:k], vecs[:, :k]
-    elif coords is not None and n > MULTILEVEL_MIN_VERTICES and k < 20:
+    elif coords is not None and n > MULTILEVEL_MIN_VERTICES and k < 20 and (
+            k <= MULTILEVEL_MAX_K or n > EXACT_MAX_VERTICES):
         vals, vecs = multilevel_eigenvectors(L, k, coords, rng)
     else:
         scale = float(np.abs(L.diagonal()).mean()) or 1.0
