@@ -153,10 +153,12 @@ def _diagnose(mesh: _Mesh, sigma_mm: float) -> _Diagnosis:
     return _Diagnosis(Kd, D, X, kind)
 
 
-def _trial(mesh: _Mesh, refine: bool = True) -> tuple[float, float]:
+def _trial(mesh: _Mesh, refine: bool = True, with_uv: bool = False):
     """(EL, EA) of the cheap trial unfolding (module doc): conformal start, a short relaxation
     with the flip penalty, one short L1 refinement round (refine: as the full unfolding will:
-    refine_rounds 0 skips it); no overlap correction."""
+    refine_rounds 0 skips it); no overlap correction.  with_uv: (EL, EA, UV (k,2) mm), the
+    trial pattern on mesh.Vc, from which the piece's full unfolding starts (`unfold_patch`'s
+    start_uv: nearer its minimum than the conformal map, so fewer iterations)."""
     Vd, Fd, topo = mesh.Vc, mesh.Fc, mesh.topo  # a disk (`_piece_mesh`)
     UV = conformal_unfolding(topo)
     springs = build_springs(topo)
@@ -167,7 +169,8 @@ def _trial(mesh: _Mesh, refine: bool = True) -> tuple[float, float]:
         flip_free = not np.any(signed_areas(UV, topo.F) <= 0)
         UV, _ = refine_lengths_l1(UV, springs, topo.edge_face_count.astype(np.float64), rounds=TRIAL_REFINE_ROUNDS,
                                   max_iter=REFINE_TRIAL_ITERS, F=topo.F if flip_free else None, A0=topo.areas)
-    return length_area_errors(Vd, Fd, UV)
+    el, ea = length_area_errors(Vd, Fd, UV)
+    return (el, ea, UV) if with_uv else (el, ea)
 
 
 def _local_extremes(topo: MeshTopology, Kd: np.ndarray, sign: float, count: int, allowed=None) -> np.ndarray:

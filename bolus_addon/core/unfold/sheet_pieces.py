@@ -157,8 +157,11 @@ class _Run:
 
     def with_trial(self, p: _Piece) -> _Piece:
         """The cheap trial of a piece (none for a developable one: (0, 0))."""
-        if p.trial is None:
-            p.trial = (0.0, 0.0) if p.diag.kind == "flat" else _trial(p.mesh, self.refine_rounds > 0)
+        if p.trial is None and p.diag.kind == "flat":
+            p.trial = (0.0, 0.0)
+        elif p.trial is None:
+            el, ea, p.trial_uv = _trial(p.mesh, self.refine_rounds > 0, with_uv=True)
+            p.trial = (el, ea)
         return p
 
     def trial_score(self, p: _Piece) -> float:
@@ -187,7 +190,7 @@ class _Run:
         in one patch still ends with one stuck piece of 754 overlapping triangles, warned.)"""
         if p.full is None:
             u = unfold_patch(p.mesh.Vc, p.mesh.Fc, method=self.method, refine_rounds=self.refine_rounds,
-                             progress=self.pr.sub(lo, hi, head))
+                             progress=self.pr.sub(lo, hi, head), start_uv=p.trial_uv)
             u.vert_origin = p.mesh.origin[u.vert_origin]
             u.cut = u.cut or p.mesh.cut
             p.full = u
