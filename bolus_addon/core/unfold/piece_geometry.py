@@ -153,14 +153,26 @@ def _diagnose(mesh: _Mesh, sigma_mm: float) -> _Diagnosis:
     return _Diagnosis(Kd, D, X, kind)
 
 
-def _trial(mesh: _Mesh, refine: bool = True, with_uv: bool = False):
+def _inherit_uv(parent: _Mesh, parent_faces, uv, child: _Mesh, child_faces) -> np.ndarray | None:
+    """The pattern uv (k,2) of a piece carried to a piece cut from it (a dart more, or one side
+    of a split: child_faces a subset of parent_faces, both sorted, each mesh's rows in that
+    order), corner by corner; None where that folds a triangle over (a cut made differently)."""
+    rows = np.searchsorted(parent_faces, child_faces)
+    out = np.empty((len(child.Vc), 2))
+    out[child.Fc.ravel()] = uv[parent.Fc[rows].ravel()]
+    if np.any(signed_areas(out, child.Fc) <= 0):
+        return None
+    return out
+
+
+def _trial(mesh: _Mesh, refine: bool = True, with_uv: bool = False, start=None):
     """(EL, EA) of the cheap trial unfolding (module doc): conformal start, a short relaxation
     with the flip penalty, one short L1 refinement round (refine: as the full unfolding will:
     refine_rounds 0 skips it); no overlap correction.  with_uv: (EL, EA, UV (k,2) mm), the
     trial pattern on mesh.Vc, from which the piece's full unfolding starts (`unfold_patch`'s
     start_uv: nearer its minimum than the conformal map, so fewer iterations)."""
     Vd, Fd, topo = mesh.Vc, mesh.Fc, mesh.topo  # a disk (`_piece_mesh`)
-    UV = conformal_unfolding(topo)
+    UV = conformal_unfolding(topo) if start is None else start
     springs = build_springs(topo)
     flip_free = not np.any(signed_areas(UV, topo.F) <= 0)
     UV, _, _ = relax_lbfgs(UV, springs, max_iter=TRIAL_ITERS, tol=TRIAL_TOL, F=topo.F if flip_free else None,

@@ -58,6 +58,7 @@ from .piece_geometry import (  # noqa: F401 (re-exported)
     _piece_mesh,
     _diagnose,
     _trial,
+    _inherit_uv,
     _local_extremes,
     _depth,
     _interior_graph,
@@ -160,8 +161,11 @@ class _Run:
         if p.trial is None and p.diag.kind == "flat":
             p.trial = (0.0, 0.0)
         elif p.trial is None:
-            el, ea, p.trial_uv = _trial(p.mesh, self.refine_rounds > 0, with_uv=True)
-            p.trial = (el, ea)
+            q, start = p.parent, None
+            if q is not None and q.trial_uv is not None:
+                start = _inherit_uv(q.mesh, q.faces, q.trial_uv, p.mesh, p.faces)
+            el, ea, p.trial_uv = _trial(p.mesh, self.refine_rounds > 0, with_uv=True, start=start)
+            p.trial, p.parent = (el, ea), None
         return p
 
     def trial_score(self, p: _Piece) -> float:
@@ -270,7 +274,7 @@ class _Run:
         if path is None or len(path) < 2:
             return "none"
         gpath = mesh.origin[path]
-        q = _Piece(p.faces, ndarts=p.ndarts + 1)
+        q = _Piece(p.faces, ndarts=p.ndarts + 1, parent=p)
         try:
             self.with_trial(self.prepare(q, np.r_[self.dart_edges, np.stack([gpath[:-1], gpath[1:]], 1)], like=p))
         except BolusError:
@@ -297,7 +301,7 @@ class _Run:
         if res is None or isinstance(res, str):
             return res or "none"
         path, side, eid = res
-        qa, qb = _Piece(p.faces[side]), _Piece(p.faces[~side])
+        qa, qb = _Piece(p.faces[side], parent=p), _Piece(p.faces[~side], parent=p)
         try:  # the larger side first: if it is not better, the other one need not be unfolded
             for q in sorted((qa, qb), key=lambda q: -len(q.faces)):
                 if self.trial_score(self.with_trial(self.prepare(q))) >= (1.0 - MIN_GAIN) * s0:
