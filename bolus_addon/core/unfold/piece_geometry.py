@@ -21,7 +21,7 @@ from .springs import build_springs
 #: of `REFINE_TRIAL_ITERS` iterations.  Its EL was 1.05-1.26 x the full unfolding's (cone
 #: 9.1 / 7.2 %, saddle 3.3 / 2.9 %, half saddle 0.82 / 0.67 %, 60 degree cap 3.75 / 3.56 %)
 #: at 15-25 % of the time
-TRIAL_ITERS = 40
+TRIAL_ITERS = 20
 
 
 TRIAL_REFINE_ROUNDS = 1
