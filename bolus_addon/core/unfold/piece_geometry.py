@@ -15,7 +15,7 @@ from .overlap import signed_areas
 from .piece_advice import EXCESS_SHARE, diffused_defect
 from .refine import refine_lengths_l1
 from .relax import relax_lbfgs
-from .springs import build_springs
+from .springs import CONTOUR_WINDOW, _build_springs
 
 #: the cheap trial: L-BFGS iterations from the conformal start and one L1 refinement round
 #: of `REFINE_TRIAL_ITERS` iterations.  Its EL was 1.05-1.26 x the full unfolding's (cone
@@ -168,21 +168,23 @@ def _inherit_uv(parent: _Mesh, parent_faces, uv, child: _Mesh, child_faces) -> n
 def _trial(mesh: _Mesh, refine: bool = True, with_uv: bool = False, start=None):
     """(EL, EA) of the cheap trial unfolding (module doc): conformal start, a short relaxation
     with the flip penalty, one short L1 refinement round (refine: as the full unfolding will:
-    refine_rounds 0 skips it); no overlap correction.  with_uv: (EL, EA, UV (k,2) mm), the
-    trial pattern on mesh.Vc, from which the piece's full unfolding starts (`unfold_patch`'s
-    start_uv: nearer its minimum than the conformal map, so fewer iterations)."""
+    refine_rounds 0 skips it); no overlap correction.  start: (k,2) a flip-free pattern to relax
+    from instead of the conformal map.  with_uv: (EL, EA, UV (k,2) mm), UV the relaxed pattern
+    before the refinement (nearer the spring energy's minimum than the refined one), from which
+    the piece's full unfolding (`unfold_patch`'s start_uv) and the trials of pieces cut from it start."""
     Vd, Fd, topo = mesh.Vc, mesh.Fc, mesh.topo  # a disk (`_piece_mesh`)
     UV = conformal_unfolding(topo) if start is None else start
-    springs = build_springs(topo)
+    springs = _build_springs(topo, CONTOUR_WINDOW, True)  # (the piece's mesh is checked)
     flip_free = not np.any(signed_areas(UV, topo.F) <= 0)
     UV, _, _ = relax_lbfgs(UV, springs, max_iter=TRIAL_ITERS, tol=TRIAL_TOL, F=topo.F if flip_free else None,
                            A0=topo.areas, flip_weight=TRIAL_FLIP_WEIGHT if flip_free else 0.0)
+    relaxed = UV
     if refine and TRIAL_REFINE_ROUNDS:
         flip_free = not np.any(signed_areas(UV, topo.F) <= 0)
         UV, _ = refine_lengths_l1(UV, springs, topo.edge_face_count.astype(np.float64), rounds=TRIAL_REFINE_ROUNDS,
                                   max_iter=REFINE_TRIAL_ITERS, F=topo.F if flip_free else None, A0=topo.areas)
     el, ea = length_area_errors(Vd, Fd, UV)
-    return (el, ea, UV) if with_uv else (el, ea)
+    return (el, ea, relaxed) if with_uv else (el, ea)
 
 
 def _local_extremes(topo: MeshTopology, Kd: np.ndarray, sign: float, count: int, allowed=None) -> np.ndarray:

@@ -299,7 +299,9 @@ def _cut_patch(V, F, method: str, start: str, st: _Stages, crossed_springs: bool
     deficit, excess = _curvature_sums(topo0)
     F, used = submesh(F, np.ones(len(F), dtype=bool))  # vertices in no triangle are left out
     cut = cut_to_disk(V[used], F)
-    topo = MeshTopology(cut.V, cut.F)
+    # a disk with every vertex in a triangle: the same mesh as checked, its topology reused
+    same = not cut.was_cut and len(used) == len(V) and np.array_equal(cut.vert_origin, np.arange(len(V)))
+    topo = topo0 if same else MeshTopology(cut.V, cut.F)
     # (the patch is checked: _check_patch; the cut keeps its triangles)
     springs = _build_springs(topo, CONTOUR_WINDOW if disturbing_springs else 0, crossed_springs)
     return _Run(topo, springs, st), cut, used, deficit, excess
