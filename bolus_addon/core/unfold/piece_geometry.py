@@ -22,6 +22,7 @@ from .springs import CONTOUR_WINDOW, _build_springs
 #: 9.1 / 7.2 %, saddle 3.3 / 2.9 %, half saddle 0.82 / 0.67 %, 60 degree cap 3.75 / 3.56 %)
 #: at 15-25 % of the time
 TRIAL_ITERS = 20
+TRIAL_WARM_ITERS = 10
 
 
 TRIAL_REFINE_ROUNDS = 1
@@ -176,7 +177,8 @@ def _trial(mesh: _Mesh, refine: bool = True, with_uv: bool = False, start=None):
     UV = conformal_unfolding(topo) if start is None else start
     springs = _build_springs(topo, CONTOUR_WINDOW, True)  # (the piece's mesh is checked)
     flip_free = not np.any(signed_areas(UV, topo.F) <= 0)
-    UV, _, _ = relax_lbfgs(UV, springs, max_iter=TRIAL_ITERS, tol=TRIAL_TOL, F=topo.F if flip_free else None,
+    UV, _, _ = relax_lbfgs(UV, springs, max_iter=TRIAL_ITERS if start is None else TRIAL_WARM_ITERS, tol=TRIAL_TOL,
+                           F=topo.F if flip_free else None,
                            A0=topo.areas, flip_weight=TRIAL_FLIP_WEIGHT if flip_free else 0.0)
     relaxed = UV
     if refine and TRIAL_REFINE_ROUNDS:
