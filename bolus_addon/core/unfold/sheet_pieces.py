@@ -131,6 +131,7 @@ class _Run:
         self.darts: list[_DartRec] = []
         self.splits: list[_SplitRec] = []
         self.changes = 0
+        self.seen: dict[bytes, _Piece] = {}  # split sides prepared and tried, by `_key`
 
     # ---------------------------------------------------------- bookkeeping
     @property
@@ -301,7 +302,7 @@ class _Run:
         if res is None or isinstance(res, str):
             return res or "none"
         path, side, eid = res
-        qa, qb = _Piece(p.faces[side], parent=p), _Piece(p.faces[~side], parent=p)
+        qa, qb = self._side(p.faces[side], p), self._side(p.faces[~side], p)
         try:  # the larger side first: if it is not better, the other one need not be unfolded
             for q in sorted((qa, qb), key=lambda q: -len(q.faces)):
                 if self.trial_score(self.with_trial(self.prepare(q))) >= (1.0 - MIN_GAIN) * s0:
@@ -316,6 +317,26 @@ class _Run:
         self.pieces[k:k + 1] = [qa, qb]
         self.changes += 1
         return "kept"
+
+    def _side(self, faces: np.ndarray, parent: _Piece) -> _Piece:
+        """A new piece of these faces cut from parent, with the mesh, diagnosis and trial of an
+        earlier piece of the same faces and the same darts inside if there was one (a split
+        tried, found worse, then tried again after a dart elsewhere)."""
+        key = self._key(faces)
+        old = self.seen.get(key)
+        if old is not None and old.trial is not None:
+            return _Piece(faces, old.mesh, old.diag, old.trial, old.trial_uv)
+        q = _Piece(faces, parent=parent)
+        self.seen[key] = q
+        return q
+
+    def _key(self, faces: np.ndarray) -> bytes:
+        """The faces and the dart edges with both ends among their vertices: what `_piece_mesh` cuts."""
+        de = self.dart_edges
+        inside = np.isin(de, self.F[faces]).all(axis=1) if len(de) else np.zeros(0, dtype=bool)
+        e = np.sort(de[inside], axis=1)
+        e = e[np.lexsort((e[:, 1], e[:, 0]))] if len(e) else e
+        return faces.tobytes() + b"|" + e.astype(np.int64).tobytes()
 
     def _darts_in(self, q: _Piece) -> int:
         fs = set(q.faces.tolist())
