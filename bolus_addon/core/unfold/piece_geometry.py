@@ -18,10 +18,15 @@ from .relax import relax_lbfgs
 from .springs import CONTOUR_WINDOW, _build_springs
 
 #: the cheap trial: L-BFGS iterations from the conformal start and one L1 refinement round
-#: of `REFINE_TRIAL_ITERS` iterations.  Its EL was 1.05-1.26 x the full unfolding's (cone
-#: 9.1 / 7.2 %, saddle 3.3 / 2.9 %, half saddle 0.82 / 0.67 %, 60 degree cap 3.75 / 3.56 %)
-#: at 15-25 % of the time
+#: of `REFINE_TRIAL_ITERS` iterations.  With 40 its EL was 1.05-1.26 x the full unfolding's
+#: (cone 9.1 / 7.2 %, saddle 3.3 / 2.9 %, half saddle 0.82 / 0.67 %, 60 degree cap 3.75 /
+#: 3.56 %); with 20, on the final pieces of the 17 hard patches with a full EL above 1 %:
+#: 1.14-1.16 (4 pieces); 20 instead of 40 changed the pieces of 3 of them (all still met
+#: the targets) and took 17 % less time
 TRIAL_ITERS = 20
+#: the same from the relaxed trial pattern of the piece it was cut from (`_inherit_uv`):
+#: nearer the minimum but for the new cut; trial / full EL 1.10-1.27 (19 such pieces, median
+#: 1.18); 6 iterations changed the pieces on two hard patches
 TRIAL_WARM_ITERS = 10
 
 

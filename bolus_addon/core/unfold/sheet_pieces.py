@@ -94,7 +94,8 @@ MAX_PIECES = 8
 MAX_DARTS = 3
 #: a trial EL above TRIAL_SLACK x max_el misses the target for sure: the full unfolding is
 #: skipped and the piece refined at once (trial / full EL on the 13 hard nose patches that are
-#: not hopeless: 1.04-1.21, mean 1.15).  1.1 rather than 1.25: a full unfolding that then
+#: not hopeless: 1.04-1.21, mean 1.15, with 40-iteration trials; 1.10-1.27 with today's
+#: shorter and warm-started ones, `piece_geometry.TRIAL_ITERS`).  1.1 rather than 1.25: a full unfolding that then
 #: misses is wasted (it costs 2-4 trials); on the 17 hard patches 1.1 took 13 % less time
 #: than 1.25, with one more piece on two of them
 TRIAL_SLACK = 1.1
