@@ -105,13 +105,14 @@ def _two_loop(g, S, Y, apply_h0, gamma: float, SY):
     SY: the products y.s of the pairs and gamma = s.K s / s.y of the newest pair, both computed
     once when a pair is stored.  The pairs are (n,2) C-ordered arrays; the dot products and
     updates run on their flat views with Python floats (the per-step numpy overhead, not
-    the arithmetic, is the cost on patches of a few hundred vertices)."""
+    the arithmetic, is the cost on patches of a few hundred vertices), each rounded as in the
+    plain loop over (n,2) arrays: the same numbers, bit for bit."""
     q = g.copy()
     qf = q.ravel()
     k = len(S)
     alphas = [0.0] * k
     for i in range(k - 1, -1, -1):
-        a_ = float(np.dot(S[i].ravel(), qf)) / SY[i]
+        a_ = (1.0 / SY[i]) * float(np.dot(S[i].ravel(), qf))  # rho s.q, rounded as rho times
         alphas[i] = a_
         qf -= a_ * Y[i].ravel()
     r = np.ascontiguousarray(apply_h0(q))  # (the solver may hand back a Fortran-ordered array)
@@ -119,7 +120,7 @@ def _two_loop(g, S, Y, apply_h0, gamma: float, SY):
         r *= gamma
     rf = r.ravel()
     for i in range(k):
-        b_ = float(np.dot(Y[i].ravel(), rf)) / SY[i]
+        b_ = (1.0 / SY[i]) * float(np.dot(Y[i].ravel(), rf))
         rf += (alphas[i] - b_) * S[i].ravel()
     return -r
 
