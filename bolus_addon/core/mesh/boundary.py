@@ -361,6 +361,9 @@ def cut_to_disk(V, F) -> CutResult:
         cut.F, cut.origin = split_along_edges(F, np.zeros((0, 2), dtype=np.int64), topo)
         notes.append(f"split {len(pinched)} pinched vertex(es) (e.g. vertex {int(pinched[0])})")
     st = surface_type(cut.Vc, cut.F)
+    if st["is_disk"] and not notes:  # nothing to cut (the checks below would find it unchanged)
+        return CutResult(V=cut.Vc, F=cut.F, vert_origin=cut.origin, cut_paths=[], cut_length_mm=0.0,
+                         description=cut.description(notes))
     _require_cuttable(st)
     if st["boundary_loops"] == 0:
         cut.open_closed_surface()

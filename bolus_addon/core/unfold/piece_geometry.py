@@ -15,13 +15,19 @@ from .overlap import signed_areas
 from .piece_advice import EXCESS_SHARE, diffused_defect
 from .refine import refine_lengths_l1
 from .relax import relax_lbfgs
-from .springs import build_springs
+from .springs import CONTOUR_WINDOW, _build_springs
 
 #: the cheap trial: L-BFGS iterations from the conformal start and one L1 refinement round
-#: of `REFINE_TRIAL_ITERS` iterations.  Its EL was 1.05-1.26 x the full unfolding's (cone
-#: 9.1 / 7.2 %, saddle 3.3 / 2.9 %, half saddle 0.82 / 0.67 %, 60 degree cap 3.75 / 3.56 %)
-#: at 15-25 % of the time
-TRIAL_ITERS = 40
+#: of `REFINE_TRIAL_ITERS` iterations.  With 40 its EL was 1.05-1.26 x the full unfolding's
+#: (cone 9.1 / 7.2 %, saddle 3.3 / 2.9 %, half saddle 0.82 / 0.67 %, 60 degree cap 3.75 /
+#: 3.56 %); with 20, on the final pieces of the 17 hard patches with a full EL above 1 %:
+#: 1.14-1.16 (4 pieces); 20 instead of 40 changed the pieces of 3 of them (all still met
+#: the targets) and took 17 % less time
+TRIAL_ITERS = 20
+#: the same from the relaxed trial pattern of the piece it was cut from (`_inherit_uv`):
+#: nearer the minimum but for the new cut; trial / full EL 1.10-1.27 (19 such pieces, median
+#: 1.18); 6 iterations changed the pieces on two hard patches
+TRIAL_WARM_ITERS = 10
 
 
 TRIAL_REFINE_ROUNDS = 1
@@ -155,21 +161,39 @@ def _diagnose(mesh: _Mesh, sigma_mm: float) -> _Diagnosis:
     return _Diagnosis(Kd, D, X, kind)
 
 
-def _trial(mesh: _Mesh, refine: bool = True) -> tuple[float, float]:
+def _inherit_uv(parent: _Mesh, parent_faces, uv, child: _Mesh, child_faces) -> np.ndarray | None:
+    """The pattern uv (k,2) of a piece carried to a piece cut from it (a dart more, or one side
+    of a split: child_faces a subset of parent_faces, both sorted, each mesh's rows in that
+    order), corner by corner; None where that folds a triangle over (a cut made differently)."""
+    rows = np.searchsorted(parent_faces, child_faces)
+    out = np.empty((len(child.Vc), 2))
+    out[child.Fc.ravel()] = uv[parent.Fc[rows].ravel()]
+    if np.any(signed_areas(out, child.Fc) <= 0):
+        return None
+    return out
+
+
+def _trial(mesh: _Mesh, refine: bool = True, with_uv: bool = False, start=None):
     """(EL, EA) of the cheap trial unfolding (module doc): conformal start, a short relaxation
     with the flip penalty, one short L1 refinement round (refine: as the full unfolding will:
-    refine_rounds 0 skips it); no overlap correction."""
+    refine_rounds 0 skips it); no overlap correction.  start: (k,2) a flip-free pattern to relax
+    from instead of the conformal map.  with_uv: (EL, EA, UV (k,2) mm), UV the relaxed pattern
+    before the refinement (nearer the spring energy's minimum than the refined one), from which
+    the piece's full unfolding (`unfold_patch`'s start_uv) and the trials of pieces cut from it start."""
     Vd, Fd, topo = mesh.Vc, mesh.Fc, mesh.topo  # a disk (`_piece_mesh`)
-    UV = conformal_unfolding(topo)
-    springs = build_springs(topo)
+    UV = conformal_unfolding(topo) if start is None else start
+    springs = _build_springs(topo, CONTOUR_WINDOW, True)  # (the piece's mesh is checked)
     flip_free = not np.any(signed_areas(UV, topo.F) <= 0)
-    UV, _, _ = relax_lbfgs(UV, springs, max_iter=TRIAL_ITERS, tol=TRIAL_TOL, F=topo.F if flip_free else None,
+    UV, _, _ = relax_lbfgs(UV, springs, max_iter=TRIAL_ITERS if start is None else TRIAL_WARM_ITERS, tol=TRIAL_TOL,
+                           F=topo.F if flip_free else None,
                            A0=topo.areas, flip_weight=TRIAL_FLIP_WEIGHT if flip_free else 0.0)
+    relaxed = UV
     if refine and TRIAL_REFINE_ROUNDS:
         flip_free = not np.any(signed_areas(UV, topo.F) <= 0)
         UV, _ = refine_lengths_l1(UV, springs, topo.edge_face_count.astype(np.float64), rounds=TRIAL_REFINE_ROUNDS,
                                   max_iter=REFINE_TRIAL_ITERS, F=topo.F if flip_free else None, A0=topo.areas)
-    return length_area_errors(Vd, Fd, UV)
+    el, ea = length_area_errors(Vd, Fd, UV)
+    return (el, ea, relaxed) if with_uv else (el, ea)
 
 
 def _local_extremes(topo: MeshTopology, Kd: np.ndarray, sign: float, count: int, allowed=None) -> np.ndarray:

@@ -99,27 +99,29 @@ def _objective(springs: Springs, n: int, F, A0, flip_weight: float, area_weights
     return fun
 
 
-def _two_loop(g, S, Y, apply_h0, apply_k, SY=None):
-    """L-BFGS direction -H g by the two-loop recursion with H0 = gamma K^-1.
+def _two_loop(g, S, Y, apply_h0, gamma: float, SY):
+    """L-BFGS direction -H g (n,2) by the two-loop recursion with H0 = gamma K^-1.
 
-    SY: the products y.s of the pairs (computed once when a pair is stored; the same
-    numbers as computing them here)."""
-    if SY is None:
-        SY = [np.vdot(y_, s_) for s_, y_ in zip(S, Y)]
+    SY: the products y.s of the pairs and gamma = s.K s / s.y of the newest pair, both computed
+    once when a pair is stored.  The pairs are (n,2) C-ordered arrays; the dot products and
+    updates run on their flat views with Python floats (the per-step numpy overhead, not
+    the arithmetic, is the cost on patches of a few hundred vertices), each rounded as in the
+    plain loop over (n,2) arrays: the same numbers, bit for bit."""
     q = g.copy()
-    tmp = np.empty_like(q)
-    alphas = []
-    for s_, y_, sy in zip(reversed(S), reversed(Y), reversed(SY)):
-        rho = 1.0 / sy
-        a_ = rho * np.vdot(s_, q)
-        alphas.append((a_, rho))
-        q -= np.multiply(a_, y_, out=tmp)
-    r = apply_h0(q)
-    if S:  # scale H0: y ~ (1/gamma) K s  =>  gamma = s.K s / s.y (a matvec, no solve)
-        r *= np.vdot(S[-1], apply_k(S[-1])) / max(SY[-1], 1e-300)
-    for (a_, rho), s_, y_ in zip(reversed(alphas), S, Y):
-        b_ = rho * np.vdot(y_, r)
-        r += np.multiply(a_ - b_, s_, out=tmp)
+    qf = q.ravel()
+    k = len(S)
+    alphas = [0.0] * k
+    for i in range(k - 1, -1, -1):
+        a_ = (1.0 / SY[i]) * float(np.dot(S[i].ravel(), qf))  # rho s.q, rounded as rho times
+        alphas[i] = a_
+        qf -= a_ * Y[i].ravel()
+    r = np.ascontiguousarray(apply_h0(q))  # (the solver may hand back a Fortran-ordered array)
+    if k:  # scale H0: y ~ (1/gamma) K s  =>  gamma = s.K s / s.y (a matvec per pair, no solve)
+        r *= gamma
+    rf = r.ravel()
+    for i in range(k):
+        b_ = (1.0 / SY[i]) * float(np.dot(Y[i].ravel(), rf))
+        rf += (alphas[i] - b_) * S[i].ravel()
     return -r
 
 
@@ -169,11 +171,12 @@ def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, 
     S: list[np.ndarray] = []
     Y: list[np.ndarray] = []
     SY: list[float] = []  # y.s of every stored pair
+    gamma = 1.0  # s.K s / s.y of the newest pair (`_two_loop`)
     history = [e]
     it = 0
     t_report = time.perf_counter() + PROGRESS_EVERY
     for it in range(1, max_iter + 1):
-        d = _two_loop(g, S, Y, apply_h0, apply_k, SY)
+        d = _two_loop(g, S, Y, apply_h0, gamma, SY)
         slope = float(np.vdot(g, d))
         if not slope < 0:  # not a descent direction: forget the history
             S.clear()
@@ -188,10 +191,12 @@ def relax_lbfgs(UV0, springs: Springs, max_iter: int = 2000, tol: float = 1e-9, 
             break
         xn, en, gn = step
         s_, y_ = xn - x, gn - g
-        if np.vdot(s_, y_) > CURVATURE_TOL * max(np.vdot(s_, s_), 1e-300):
+        sy = float(np.vdot(s_, y_))
+        if sy > CURVATURE_TOL * max(float(np.vdot(s_, s_)), 1e-300):
             S.append(s_)
             Y.append(y_)
-            SY.append(np.vdot(y_, s_))
+            SY.append(sy)
+            gamma = float(np.vdot(s_, apply_k(s_))) / max(sy, 1e-300)
             if len(S) > memory:
                 S.pop(0)
                 Y.pop(0)

@@ -64,6 +64,7 @@ from .piece_geometry import (  # noqa: F401 (re-exported)
     _piece_mesh,
     _diagnose,
     _trial,
+    _inherit_uv,
     _local_extremes,
     _depth,
     _interior_graph,
@@ -99,7 +100,8 @@ MAX_PIECES = 8
 MAX_DARTS = 3
 #: a trial EL above TRIAL_SLACK x max_el misses the target for sure: the full unfolding is
 #: skipped and the piece refined at once (trial / full EL on the 13 hard nose patches that are
-#: not hopeless: 1.04-1.21, mean 1.15).  1.1 rather than 1.25: a full unfolding that then
+#: not hopeless: 1.04-1.21, mean 1.15, with 40-iteration trials; 1.10-1.27 with today's
+#: shorter and warm-started ones, `piece_geometry.TRIAL_ITERS`).  1.1 rather than 1.25: a full unfolding that then
 #: misses is wasted (it costs 2-4 trials); on the 17 hard patches 1.1 took 13 % less time
 #: than 1.25, with one more piece on two of them
 TRIAL_SLACK = 1.1
@@ -136,6 +138,7 @@ class _Run:
         self.darts: list[_DartRec] = []
         self.splits: list[_SplitRec] = []
         self.changes = 0
+        self.seen: dict[bytes, _Piece] = {}  # split sides prepared and tried, by `_key`
 
     # ---------------------------------------------------------- bookkeeping
     @property
@@ -163,8 +166,14 @@ class _Run:
 
     def with_trial(self, p: _Piece) -> _Piece:
         """The cheap trial of a piece (none for a developable one: (0, 0))."""
-        if p.trial is None:
-            p.trial = (0.0, 0.0) if p.diag.kind == "flat" else _trial(p.mesh, self.refine_rounds > 0)
+        if p.trial is None and p.diag.kind == "flat":
+            p.trial = (0.0, 0.0)
+        elif p.trial is None:
+            q, start = p.parent, None
+            if q is not None and q.trial_uv is not None:
+                start = _inherit_uv(q.mesh, q.faces, q.trial_uv, p.mesh, p.faces)
+            el, ea, p.trial_uv = _trial(p.mesh, self.refine_rounds > 0, with_uv=True, start=start)
+            p.trial, p.parent = (el, ea), None
         return p
 
     def trial_score(self, p: _Piece) -> float:
@@ -193,7 +202,7 @@ class _Run:
         in one patch still ends with one stuck piece of 754 overlapping triangles, warned.)"""
         if p.full is None:
             u = unfold_patch(p.mesh.Vc, p.mesh.Fc, method=self.method, refine_rounds=self.refine_rounds,
-                             progress=self.pr.sub(lo, hi, head))
+                             progress=self.pr.sub(lo, hi, head), start_uv=p.trial_uv)
             u.vert_origin = p.mesh.origin[u.vert_origin]
             u.cut = u.cut or p.mesh.cut
             p.full = u
@@ -273,7 +282,7 @@ class _Run:
         if path is None or len(path) < 2:
             return "none"
         gpath = mesh.origin[path]
-        q = _Piece(p.faces, ndarts=p.ndarts + 1)
+        q = _Piece(p.faces, ndarts=p.ndarts + 1, parent=p)
         try:
             self.with_trial(self.prepare(q, np.r_[self.dart_edges, np.stack([gpath[:-1], gpath[1:]], 1)], like=p))
         except BolusError:
@@ -300,7 +309,7 @@ class _Run:
         if res is None or isinstance(res, str):
             return res or "none"
         path, side, eid = res
-        qa, qb = _Piece(p.faces[side]), _Piece(p.faces[~side])
+        qa, qb = self._side(p.faces[side], p), self._side(p.faces[~side], p)
         try:  # the larger side first: if it is not better, the other one need not be unfolded
             for q in sorted((qa, qb), key=lambda q: -len(q.faces)):
                 if self.trial_score(self.with_trial(self.prepare(q))) >= (1.0 - MIN_GAIN) * s0:
@@ -315,6 +324,26 @@ class _Run:
         self.pieces[k:k + 1] = [qa, qb]
         self.changes += 1
         return "kept"
+
+    def _side(self, faces: np.ndarray, parent: _Piece) -> _Piece:
+        """A new piece of these faces cut from parent, with the mesh, diagnosis and trial of an
+        earlier piece of the same faces and the same darts inside if there was one (a split
+        tried, found worse, then tried again after a dart elsewhere)."""
+        key = self._key(faces)
+        old = self.seen.get(key)
+        if old is not None and old.trial is not None:
+            return _Piece(faces, old.mesh, old.diag, old.trial, old.trial_uv)
+        q = _Piece(faces, parent=parent)
+        self.seen[key] = q
+        return q
+
+    def _key(self, faces: np.ndarray) -> bytes:
+        """The faces and the dart edges with both ends among their vertices: what `_piece_mesh` cuts."""
+        de = self.dart_edges
+        inside = np.isin(de, self.F[faces]).all(axis=1) if len(de) else np.zeros(0, dtype=bool)
+        e = np.sort(de[inside], axis=1)
+        e = e[np.lexsort((e[:, 1], e[:, 0]))] if len(e) else e
+        return faces.tobytes() + b"|" + e.astype(np.int64).tobytes()
 
     def _darts_in(self, q: _Piece) -> int:
         fs = set(q.faces.tolist())

@@ -104,6 +104,8 @@ class _Piece:
     mesh: _Mesh | None = None
     diag: _Diagnosis | None = None
     trial: tuple | None = None  # (EL, EA)
+    trial_uv: np.ndarray | None = None  # (k,2) the trial pattern on mesh.Vc: the full unfolding's start
+    parent: "_Piece | None" = None  # the piece this one was cut from: its trial pattern starts this one's trial
     full: Unfolding | None = None
     stuck: str = ""  # why no change helped ("" while refinement may still help)
     ndarts: int = 0

@@ -30,6 +30,7 @@ from ..mesh.boundary import cut_to_disk
 from ..errors import BolusError
 from .initial_unfolding import _conformal, _greedy, conformal_unfolding, initial_unfolding
 from .measures import (  # noqa: F401 (re-exported)
+    check_positions,
     _curvature_sums,
     _ratios,
     _triangle_errors,
@@ -181,9 +182,14 @@ def _check_patch(V, F, method: str, start: str) -> tuple[np.ndarray, np.ndarray,
     return V, F, topo
 
 
-def _start(run: _Run, start: str) -> np.ndarray:
-    """The starting UV (n,2): conformal map, or 4.5.1 with the conformal map if that folds over."""
+def _start(run: _Run, start: str, start_uv=None, cut=None, used=None) -> np.ndarray:
+    """The starting UV (n,2): start_uv (`unfold_patch`) if it serves, else the conformal map, or
+    4.5.1 with the conformal map if that folds over."""
     topo = run.topo
+    if start_uv is not None and not cut.was_cut:
+        UV = check_positions(start_uv, None, "start_uv", int(used.max()) + 1)[used, :2]
+        if not run.flipped(UV):
+            return _ccw(UV, topo.F)
     if start != "greedy":
         return _ccw(_conformal(topo), topo.F)
     UV = _greedy(topo, springs=run.springs)
@@ -293,7 +299,9 @@ def _cut_patch(V, F, method: str, start: str, st: _Stages, crossed_springs: bool
     deficit, excess = _curvature_sums(topo0)
     F, used = submesh(F, np.ones(len(F), dtype=bool))  # vertices in no triangle are left out
     cut = cut_to_disk(V[used], F)
-    topo = MeshTopology(cut.V, cut.F)
+    # a disk with every vertex in a triangle: the same mesh as checked, its topology reused
+    same = not cut.was_cut and len(used) == len(V) and np.array_equal(cut.vert_origin, np.arange(len(V)))
+    topo = topo0 if same else MeshTopology(cut.V, cut.F)
     # (the patch is checked: _check_patch; the cut keeps its triangles)
     springs = _build_springs(topo, CONTOUR_WINDOW if disturbing_springs else 0, crossed_springs)
     return _Run(topo, springs, st), cut, used, deficit, excess
@@ -343,7 +351,7 @@ def _correct(run: _Run, UV, far: bool, tangled: str, relax: bool, refine_rounds:
 
 def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: int | None = None,
                  progress=None, start: str = "auto", *, relax: bool = True, crossed_springs: bool = True,
-                 disturbing_springs: bool = True, target_el: float | None = None) -> Unfolding:
+                 disturbing_springs: bool = True, target_el: float | None = None, start_uv=None) -> Unfolding:
     """Unfold one patch into the plane at true scale (seed 4.5; the stages in the module docstring).
 
     Parameters
@@ -378,6 +386,9 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
         others, is handed back hopeless too (one short flip round, the refinement, no outline
         correction).  Otherwise the call goes on exactly as without target_el (EL may still end
         above the target).  Calibration and costs: docs/design/unfold.md.
+    start_uv : None or (n,2) mm, a flip-free pattern of the same vertices to relax from instead
+        of ``start`` (a short trial relaxation: fewer iterations); ignored if the patch had to be
+        cut or it has flipped triangles.
 
     Returns `Unfolding`: UV (n2,2) counter-clockwise; flipped triangles are corrected (4.5.3)
     and any that remain, and any overlap of the outline, are counted and reported.  Vertices
@@ -398,7 +409,7 @@ def unfold_patch(V, F, method: str = "lbfgs", refine_rounds: int = 3, max_iter: 
     st = _Stages(progress)
     _check_target(target_el)
     run, cut, used, deficit, excess = _cut_patch(V, F, method, start, st, crossed_springs, disturbing_springs)
-    UV = _start(run, start)
+    UV = _start(run, start, start_uv, cut, used)
     st.stage(*PROGRESS["relax"], "relaxing springs")
     UV, far, early, tangled = _relax_and_judge(run, UV, relax, method, max_iter, target_el)
     if early:

@@ -141,7 +141,9 @@ def _outline_stage(run: _Run, UV, flipped: int, refine_rounds: int) -> tuple[np.
     """Outline crossings (4.5.3): locally first, the whole patch if that fails, locally again;
     the last flips left are untangled locally."""
     topo = run.topo
-    if LOCAL_FIRST and len(boundary_self_intersections(UV, topo.F)):
+    if not len(boundary_self_intersections(UV, topo.F)):  # nothing crosses: nothing to correct
+        return UV, flipped
+    if LOCAL_FIRST:
         run.st.stage(*PROGRESS["local"], "overlap correction (local)")
         UV2, it, crossings2 = local_outline(UV, run.springs, topo)
         run.it += it

@@ -113,3 +113,39 @@ def test_refinement_springs_share_the_end_caches():
     stranger = s.share_end_caches(Springs(s.ends.copy(), s.rest, s.stiffness, s.n_tension, s.contour_edges,
                                           s.contour_rest, s.contour_stiffness))
     assert "_lap" not in stranger.__dict__  # other ends: nothing shared
+
+
+def _plain_two_loop(g, S, Y, apply_h0, apply_k):
+    """The two-loop recursion written out on (n,2) arrays, H0 = gamma K^-1 (Nocedal & Wright, Alg. 7.4)."""
+    q = g.copy()
+    alphas = []
+    for s_, y_ in zip(reversed(S), reversed(Y)):
+        rho = 1.0 / np.vdot(y_, s_)
+        a_ = rho * np.vdot(s_, q)
+        alphas.append((a_, rho))
+        q = q - a_ * y_
+    r = apply_h0(q)
+    if S:
+        r = r * (np.vdot(S[-1], apply_k(S[-1])) / np.vdot(Y[-1], S[-1]))
+    for (a_, rho), s_, y_ in zip(reversed(alphas), S, Y):
+        b_ = rho * np.vdot(y_, r)
+        r = r + (a_ - b_) * s_
+    return -r
+
+
+@pytest.mark.parametrize("pairs", [0, 1, 8])
+def test_two_loop_on_flat_views_gives_the_plain_recursions_numbers(pairs):
+    """relax._two_loop (flat views, Python floats, gamma and y.s kept per pair): bit for bit the plain loop."""
+    from bolus_addon.core.unfold.relax import _preconditioner, _two_loop
+
+    V, F = spherical_cap(100.0, 45.0, 3)
+    s = build_springs(MeshTopology(V, F))
+    n = len(V)
+    apply_h0, apply_k = _preconditioner(s, n, True, None)
+    rng = np.random.default_rng(3)
+    S = [rng.normal(size=(n, 2)) for _ in range(pairs)]
+    Y = [s_ + 0.1 * rng.normal(size=(n, 2)) for s_ in S]
+    g = rng.normal(size=(n, 2))
+    SY = [float(np.vdot(s_, y_)) for s_, y_ in zip(S, Y)]
+    gamma = float(np.vdot(S[-1], apply_k(S[-1]))) / SY[-1] if S else 1.0
+    np.testing.assert_array_equal(_two_loop(g, S, Y, apply_h0, gamma, SY), _plain_two_loop(g, S, Y, apply_h0, apply_k))
