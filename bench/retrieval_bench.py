@@ -115,7 +115,8 @@ STYLES = [((0.78, 0.84, 0.93), (0.80, 0.62, 0.52), "studio.sl"),
           ((0.93, 0.89, 0.80), (0.45, 0.52, 0.62), "outdoor.sl")]
 CONDITIONS = KINDS
 SCALE_SIZES = (50, 1000)  #: library sizes of the query-time rows (copies of the bench's models)
-SCALE_QUERIES = 5  #: photos timed at each size
+SCALE_QUERIES = 2  #: photos of each of SCALE_KINDS timed at each size
+SCALE_KINDS = ("clean", "cropped", "occlusion")  #: a cropped photo is also compared with every cut view
 
 
 # ------------------------------------------------------------------ the library
@@ -870,7 +871,8 @@ def scale_rows(lib_dir: Path, work: Path, queries: list[dict]) -> dict:
         library_mod = __import__("bolus_addon.core.retrieval.library", fromlist=["x"])
         keep, todo, _ = library_mod.plan_update(lib_dir, "VIEWS")
         library_mod.update_library(lib_dir, [(p, p) for p in todo], keep, lambda *a: None, 0, 1, "VIEWS")
-        photos = [q["rgb"] for q in queries if q["condition"] == "clean"][:SCALE_QUERIES]
+        by_kind = {k: [q["rgb"] for q in queries if q["condition"] == k] for k in SCALE_KINDS}
+        photos = [p for k in SCALE_KINDS for p in by_kind[k][:SCALE_QUERIES]]
         return {"build": builds, "query": retrieval_scale.query_times(lib_dir, work, photos, SCALE_SIZES)}
     except Exception as exc:  # noqa: BLE001
         return error_row("scale", "scale", exc)
@@ -967,9 +969,11 @@ def report(payload: dict, argv) -> str:
                         for c in payload["classes"])
     return (f"## Retrieval from a photo (`bench/retrieval_bench.py`)\n\n"
             f"{run_line('retrieval_bench.py', argv)}\n\n"
-            f"VIEWS (the default: each model's silhouettes from 40 directions, Zernike descriptors (the Fourier group "
-            f"cached, weight 0), the "
-            f"photo's silhouette from the seed's entropy edges and spectral contour with a background model) beside "
+            f"VIEWS (the default: each model's silhouettes from 40 directions, and each of them cut by half-planes "
+            f"from 16 directions taking away 10, 20, 30 or 40 % of it, for photos cut by the frame; Zernike "
+            f"descriptors (the Fourier group cached, weight 0); the photo's silhouette from the seed's entropy edges "
+            f"and spectral contour with a background model, and a variant without each foreign-coloured part of it, "
+            f"an occluder) beside "
             f"SKELETON (the seed's chapter 5: feature skeletons, ICP) and HU (log Hu moment invariants of the object "
             f"mask against each model's best of {len(canonical_directions())} silhouettes) on the same photos; top-1 "
             f"= the right class first, mean 1st rank = the rank of the first right model; ADR, MR, LR as eqs. "

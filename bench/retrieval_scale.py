@@ -45,7 +45,7 @@ def build_times(lib_dir: Path, work: Path, jobs=(1, 2)) -> list[dict]:
 
 def synthetic_library(lib_dir: Path, folder: Path, n: int, rng=0) -> None:
     """``folder`` with n model files (hard links, or copies, of the described models of ``lib_dir``) and a VIEWS
-    cache of their descriptors, each copy's views jittered by 1 % of the descriptor's spread."""
+    cache of their descriptors, each copy's views (whole and cut) jittered by 1 % of the descriptor's spread."""
     g = np.random.default_rng(rng)
     src = library.load_cache(lib_dir, "VIEWS")
     names = sorted(src)
@@ -61,7 +61,10 @@ def synthetic_library(lib_dir: Path, folder: Path, n: int, rng=0) -> None:
         except OSError:
             shutil.copyfile(lib_dir / e.file, target)
         M = e.descriptor.matrix + 0.01 * spread * g.standard_normal(e.descriptor.matrix.shape)
-        d = views.ViewsDescriptor(M.astype(np.float32), "model", e.descriptor.size, e.descriptor.seconds)
+        C = e.descriptor.cuts.astype(np.float32)
+        C = C + 0.01 * spread[: C.shape[1]] * g.standard_normal(C.shape)
+        d = views.ViewsDescriptor(M.astype(np.float32), "model", e.descriptor.size, e.descriptor.seconds,
+                                  cuts=C.astype(np.float16))
         entries.append(library.LibraryEntry(name, e.size, e.sha1, d, dict(e.meta), target.stat().st_mtime_ns))
     library.save_cache(folder, entries, "VIEWS")
 

@@ -34,7 +34,7 @@ __all__ = ["CACHE_FILE", "CACHE_VERSION", "MODEL_SUFFIXES", "METHODS", "DEFAULT_
 
 CACHE_FILE = "bolus_library.npz"
 #: raise when the descriptors change meaning (method, settings, format): every cache is rebuilt
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 MODEL_SUFFIXES = (".blend", ".stl", ".obj")
 METHODS = {"VIEWS": "views", "SKELETON": "skeleton_method"}  #: method -> module of this package
 DEFAULT_METHOD = "VIEWS"

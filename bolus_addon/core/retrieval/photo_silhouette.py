@@ -57,6 +57,7 @@ class Silhouette:
     threshold: float
     contour_points: int
     cut: float = 0.0  #: share of the outline on the photo's edge (the object partly out of the frame)
+    image: np.ndarray | None = None  #: (H,W,3) float the photo at the working size (the mask's)
 
 
 def otsu(values: np.ndarray, bins: int = 256) -> float:
@@ -193,4 +194,4 @@ def photo_silhouette(rgb, rng=0, use_front_end: bool = True) -> Silhouette:
         raise BolusError(f"the object fills {100 * share:.0f} % of the photo: leave some background round it")
     outline = mask & ~ndimage.binary_erosion(mask)
     edge = int(outline[0].sum() + outline[-1].sum() + outline[1:-1, 0].sum() + outline[1:-1, -1].sum())
-    return Silhouette(mask, scale, t, npts, edge / max(1, int(outline.sum())))
+    return Silhouette(mask, scale, t, npts, edge / max(1, int(outline.sum())), img)

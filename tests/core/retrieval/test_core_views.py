@@ -1,12 +1,14 @@
-"""The view matcher (core/retrieval: view_render, shape_descriptors, photo_silhouette, views): the rasteriser
-against known projections, the descriptors' invariance, the photo's silhouette against the painted truth,
-the true model ranked first on photos of views the library never saw, and the refusals."""
+"""The view matcher (core/retrieval: view_render, shape_descriptors, photo_silhouette, partial_views, views): the
+rasteriser against known projections, the descriptors' invariance, the photo's silhouette against the painted
+truth, the cut views against masks cut directly, the occluder taken out, the true model ranked first on photos of
+views the library never saw (whole, cut by the frame, occluded), and the refusals."""
 import numpy as np
 import pytest
 from meshgen import box, icosphere, torus
 from scipy import ndimage
 
 from bolus_addon.core.errors import BolusError
+from bolus_addon.core.retrieval import partial_views as pv
 from bolus_addon.core.retrieval import shape_descriptors as sd
 from bolus_addon.core.retrieval import views
 from bolus_addon.core.retrieval.photo_silhouette import photo_silhouette
@@ -225,3 +227,66 @@ def test_an_object_cut_by_the_frame_is_warned():
     cut = img[:, (cols[0] + cols[-1]) // 2 - 60:]  # the left part of the object out of the frame
     d = views.photo_descriptor(cut)
     assert d.cut > views.CUT_WARN and "touches the photo's edge" in d.warnings()[0]
+
+
+# ------------------------------------------------------------------ partial silhouettes
+
+
+def test_cut_views_are_the_masks_cut_directly():
+    """Each cut of a canonical image describes as the full-resolution mask cut by the same half-plane (the share
+    of its pixels on the far side of the direction) does, and nearer than the other cuts of that view."""
+    V, F = shapes()["pear"]
+    mask = render_views(V, F, unseen_directions(1, 7), 256)[0][0]
+    cuts = pv.cut_descriptors(sd.canonical(mask)[None]).astype(np.float64)
+    assert cuts.shape == (pv.CUT_DIRECTIONS * len(pv.CUT_SHARES), sd.ZERNIKE_COUNT)
+    ys, xs = np.nonzero(mask)
+    cy, cx = ys.mean(), xs.mean()
+    for k, (a, s) in enumerate((a, s) for a in range(pv.CUT_DIRECTIONS) for s in pv.CUT_SHARES):
+        ang = 2 * np.pi * a / pv.CUT_DIRECTIONS
+        t = (xs - cx) * np.cos(ang) + (ys - cy) * np.sin(ang)  # image rows grow downwards, as in the cuts
+        kept = np.zeros_like(mask)
+        keep = t > np.quantile(t, s)
+        kept[ys[keep], xs[keep]] = True
+        direct = sd.describe(kept)[0, sd.GROUPS["zernike"]]
+        d = np.abs(cuts - direct).sum(axis=1)
+        assert int(np.argmin(d)) == k or d[k] < 0.1 * np.abs(direct).sum(), (a, s)
+    with pytest.raises(BolusError, match="square images"):
+        pv.cut_images(np.zeros((2, 8, 9)))
+
+
+def test_a_photo_cut_by_the_frame_matches_the_cut_views(library):
+    """A quarter of the object out of the frame: its true model first, and nearer by the cut views than by the
+    whole ones."""
+    index = views.ViewIndex(library)
+    for k, (name, (V, F)) in enumerate(shapes().items()):
+        img, truth = photo(V, F, unseen_directions(1, 40 + k)[0], 60 + k)
+        rows = np.flatnonzero(truth.any(axis=1))
+        counts = np.cumsum(truth.sum(axis=1))
+        cut_row = int(np.searchsorted(counts, 0.25 * counts[-1]))
+        q = views.photo_descriptor(img[max(cut_row, rows[0]):])  # the top quarter out of the frame
+        assert q.cut > views.CUT_WARN
+        i = index.names.index(name)
+        assert index.cut_distances(q.matrix[0])[i] < index.distances(q.matrix[0])[i]
+        assert index.rank(q)[0][0] == name
+
+
+def test_an_occluder_is_taken_out_of_the_silhouette():
+    """A grey card over part of the object, jutting out of its outline: the variant without it is nearer to the
+    true silhouette than the mask with it; a shaded object of one colour gives no variant."""
+    V, F = shapes()["slab"]
+    img, truth = photo(V, F, unseen_directions(1, 5)[0], 2)
+    assert pv.occluder_variants(img, truth) == []  # shading alone is not foreign
+    ys, xs = np.nonzero(truth)
+    y0, x0 = int(np.quantile(ys, 0.55)), int(np.quantile(xs, 0.75))
+    occluded = img.copy()
+    occluded[y0:y0 + 50, x0:x0 + 70] = 0.5
+    sil = photo_silhouette(occluded)
+    variants = pv.occluder_variants(sil.image, sil.mask)
+    assert len(variants) >= 1
+
+    def iou(a, b):
+        return (a & b).sum() / (a | b).sum()
+
+    assert iou(sil.mask, truth) < 0.93 and max(iou(v, truth) for v in variants) > 0.95
+    q = views.photo_descriptor(occluded)
+    assert len(q.matrix) == 1 + len(variants)
