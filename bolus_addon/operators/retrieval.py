@@ -141,7 +141,7 @@ def import_model(context, path: Path, mm: float) -> bpy.types.Object:
 
 
 class BOLUS_OT_build_library(BolusOperator, bpy.types.Operator):
-    """Describe every model of a bolus library for retrieval from a photo (feature skeletons, seed ch. 5). Needs a folder of .blend, .stl or .obj models; makes the cache bolus_library.npz in it (only changed, added or removed models are redone)"""
+    """Describe every model of a bolus library for retrieval from a photo (silhouettes from 40 directions, whole and cut, and the seed's feature skeletons). Needs a folder of .blend, .stl or .obj models; makes the cache bolus_library.npz in it (only changed, added or removed models are redone)"""
 
     bl_idname = "bolus.build_library"
     bl_label = "Build Bolus Library"
