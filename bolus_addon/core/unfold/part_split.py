@@ -23,6 +23,7 @@ part at 3.7 % (smaller parts leave the nostril's excess to fewer darts).
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
@@ -129,7 +130,7 @@ def solve_in_parts(V, F, labels, solve, sigma_mm: float, groups=None, progress=N
     F, verts (j,) into V, `SheetPieces` of that part, its paths and vert_origin still in the
     part's own numbering), one entry per final part."""
     out = []
-    for _k, p, _count, F_local, verts, sub in labelled_patches(F, labels, progress):
+    for _k, p, _count, F_local, verts, sub in labelled_patches(F, labels, progress, "part"):
         faces = np.flatnonzero(labels == p)
         g = None if groups is None else groups[faces]
         Vp = V[verts]
@@ -167,8 +168,9 @@ def merge_parts(V, F, parts, seconds: float) -> SheetPieces:
             unf.append(u)
         darts += [Dart(first + d.piece, verts[d.path], d.defect) for d in res.darts]
         splits += [Split((first + s.pieces[0], first + s.pieces[1]), verts[s.path], s.excess) for s in res.splits]
-        if res.reason:
-            reasons.append(f"part {j + 1} of {len(parts)}: {res.reason}")
+        if res.reason:  # the part's piece numbers made the patch's
+            reasons.append(re.sub(r"\bpiece (\d+) has", lambda m, f=first: f"piece {f + int(m.group(1))} has",
+                                  res.reason))
     topo = MeshTopology(V, F)
     n = topo.n
     keys = topo.edges[:, 0] * n + topo.edges[:, 1]

@@ -436,7 +436,7 @@ def _finish(run: _Run, UV, flipped, cut, used, method, t0, hopeless, deficit, ex
                      hopeless, deficit, excess, reason, run.trial_el)
 
 
-def labelled_patches(F, labels, progress=None):
+def labelled_patches(F, labels, progress=None, word: str = "patch"):
     """The patches of a labelled mesh one after the other, for the per-patch iterators
     (`iter_unfold_patches`, `sheet_pieces.iter_sheet_pieces`).
 
@@ -444,7 +444,7 @@ def labelled_patches(F, labels, progress=None):
     Yields (k, label, count, F_local, verts, sub) for every label present in increasing
     order: F_local the patch's triangles in its own vertex numbering, verts (k,) their
     vertices in F's, sub a progress callback mapping the patch's [0, 1] into its share of
-    the whole (patches weighted by triangle count, text "patch k/n: <step>") or None.
+    the whole (patches weighted by triangle count, text "<word> k/n: <step>") or None.
     """
     labels = np.asarray(labels, dtype=np.int64)
     if labels.shape != (len(F),):
@@ -456,7 +456,7 @@ def labelled_patches(F, labels, progress=None):
         F_local, verts = submesh(F, labels == p)
         sub = None
         if progress is not None:
-            lo, hi, head = before[k], before[k + 1], f"patch {k + 1}/{len(ids)}"
+            lo, hi, head = before[k], before[k + 1], f"{word} {k + 1}/{len(ids)}"
 
             def sub(f, text, lo=lo, hi=hi, head=head):
                 progress(float(lo + (hi - lo) * min(max(f, 0.0), 1.0)), f"{head}: {text}")

@@ -141,3 +141,26 @@ def test_a_part_that_misses_is_cut_again(monkeypatch):
     res = sheet_pieces(V, F, TARGET, max_pieces=1)
     assert calls[0] is None and part_split.RESPLIT_PARTS in calls[1:]  # the first cut, then a part cut again
     assert len(np.unique(res.piece)) == len(res.unfoldings) >= 3
+
+
+def test_merged_parts_name_a_piece_that_misses_by_its_number_in_the_patch():
+    from types import SimpleNamespace
+
+    from bolus_addon.core.unfold.sheet_records import SheetPieces
+
+    V, F = height_field(lambda x, y: 0.0 * x, nx=4, ny=2)  # 16 triangles, split at x = 0
+    left = np.flatnonzero(V[F].mean(axis=1)[:, 0] < 0)
+    right = np.setdiff1d(np.arange(len(F)), left)
+
+    def part(faces, pieces, reason):
+        verts = np.unique(F[faces])
+        u = [SimpleNamespace(vert_origin=np.arange(len(verts))) for _ in range(pieces)]
+        piece = np.arange(len(faces)) % pieces
+        return faces, verts, SheetPieces(piece, u, [], [], not reason, reason, 0.0)
+
+    res = part_split.merge_parts(V, F, [part(left, 2, ""), part(right, 2, "piece 2 has EL 3.1 %, EA 2.0 %: stuck")], 0.0)
+    assert not res.met and res.reason.startswith("piece 4 has EL 3.1 %")  # 2 pieces before it
+    assert len(res.unfoldings) == 4 and sorted(set(res.piece.tolist())) == [0, 1, 2, 3]
+    assert len(res.splits) == 1 and res.splits[0].excess == 0.0  # the one border between the parts
+    a, b = sorted(res.splits[0].pieces)
+    assert a in (0, 1) and b in (2, 3)
