@@ -165,9 +165,14 @@ def polygons_next_to(me: bpy.types.Mesh, mask: np.ndarray) -> np.ndarray:
 def set_seams(me: bpy.types.Mesh, seam: np.ndarray, touched: np.ndarray) -> None:
     """Set use_seam = seam on the edges where ``touched`` is True; keep the others."""
     ne = len(me.edges)
-    cur = get_array(me.edges, "use_seam", ne, bool)
-    new = np.where(touched, seam, cur)
-    me.edges.foreach_set("use_seam", new)
+    native = compat.native_attribute(me.edges, "use_seam", ne)
+    if native is None:  # no seam layer yet: no edge has a seam
+        me.edges.foreach_set("use_seam", np.where(touched, seam, False))
+        return
+    data, key, dtype = native
+    cur = np.empty(ne, dtype=dtype)
+    data.foreach_get(key, cur)
+    data.foreach_set(key, np.where(touched, seam, cur).astype(dtype))
 
 
 def polygon_corners(me: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

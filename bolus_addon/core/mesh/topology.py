@@ -136,12 +136,15 @@ class MeshTopology:
         return np.bincount(self._halfedges[1], minlength=len(self.edges))
 
     @cached_property
+    def _halfedge_order(self) -> np.ndarray:
+        """Half-edge ids h = 3 f + i (from F[f, i] to F[f, i+1]) sorted by edge (stable)."""
+        return np.argsort(self._halfedges[1], kind="stable")
+
+    @cached_property
     def _edge_face_sorted(self) -> tuple[np.ndarray, np.ndarray]:
         """Half-edges sorted by edge: (edge id, face id) in that order."""
-        eid = self._halfedges[1]
-        fid = np.repeat(np.arange(self.m), 3)
-        order = np.argsort(eid, kind="stable")
-        return eid[order], fid[order]
+        order = self._halfedge_order
+        return self._halfedges[1][order], order // 3
 
     @cached_property
     def edge_faces(self) -> np.ndarray:
@@ -189,24 +192,22 @@ class MeshTopology:
         whose corners fall into several groups is a non-manifold ("bow-tie") vertex.
         """
         m = self.m
-        eid, fid = self._edge_face_sorted
-        # consecutive half-edges of one edge: faces fa, fb share that edge
+        eid, _ = self._edge_face_sorted
+        order = self._halfedge_order
+        # consecutive half-edges h1, h2 of one edge: their corners at the same vertex are joined
         same = np.nonzero(eid[1:] == eid[:-1])[0]
-        fa, fb = fid[same], fid[same + 1]
-        e = eid[same]
-        rows, cols = [], []
-        for end in (0, 1):
-            v = self.edges[e, end]
-            ka = np.argmax(self.F[fa] == v[:, None], axis=1)
-            kb = np.argmax(self.F[fb] == v[:, None], axis=1)
-            rows.append(3 * fa + ka)
-            cols.append(3 * fb + kb)
-        rows = np.concatenate(rows)
-        cols = np.concatenate(cols)
+        h1, h2 = order[same], order[same + 1]
+        Fr = self.F.ravel()
+        e1, e2 = 3 * (h1 // 3) + (h1 % 3 + 1) % 3, 3 * (h2 // 3) + (h2 % 3 + 1) % 3  # the corners they end at
+        along = Fr[h1] == Fr[h2]  # both run the same way (inconsistent winding)
+        rows = np.r_[h1, e1]
+        cols = np.r_[np.where(along, h2, e2), np.where(along, e2, h2)]
         G = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
-        _, comp = connected_components(G, directed=False)
-        pairs = np.unique(self.F.ravel().astype(np.int64) * (3 * m) + comp)
-        return np.bincount(pairs // (3 * m), minlength=self.n)
+        ncomp, comp = connected_components(G, directed=False)
+        # every component is the corners of one vertex: count the components of each vertex
+        comp_vertex = np.zeros(ncomp, dtype=np.int64)
+        comp_vertex[comp] = Fr
+        return np.bincount(comp_vertex, minlength=self.n)
 
     @cached_property
     def nonmanifold_vertices(self) -> np.ndarray:
