@@ -68,9 +68,9 @@ def test_build_library_caches_and_redoes_what_changed(bpy_addon, scene, tmp_path
     assert "2 models (2 described" in reports(capfd)
 
 
-def test_retrieve_imports_the_best_match_and_lists_the_best(bpy_addon, scene, tmp_path, capfd):
-    bpy = bpy_addon
-    bpy.context.scene.unit_settings.scale_length = 0.001  # 1 unit = 1 mm
+def library_and_ring_photo(bpy, tmp_path, name: str):
+    """The test library in tmp_path/lib and a photo of a ring like its torus, rendered from above
+    enough to see through the ring (from the side a torus's outline is an ellipse, as the egg's)."""
     lib = tmp_path / "lib"
     lib.mkdir()
     library(bpy, lib)
@@ -79,9 +79,15 @@ def test_retrieve_imports_the_best_match_and_lists_the_best(bpy_addon, scene, tm
     me.from_pydata(V.tolist(), [], F.tolist())
     q = bpy.data.objects.new("query", me)
     bpy.context.scene.collection.objects.link(q)
-    # from above enough to see through the ring (from the side a torus's outline is an ellipse, as the egg's)
-    photo = render_object(bpy, q, tmp_path / "photo.png", direction=(0.2, -0.5, 1.0))
+    photo = render_object(bpy, q, tmp_path / name, direction=(0.2, -0.5, 1.0))
     bpy.data.objects.remove(q)
+    return lib, photo
+
+
+def test_retrieve_imports_the_best_match_and_lists_the_best(bpy_addon, scene, tmp_path, capfd):
+    bpy = bpy_addon
+    bpy.context.scene.unit_settings.scale_length = 0.001  # 1 unit = 1 mm
+    lib, photo = library_and_ring_photo(bpy, tmp_path, "photo.png")
     bpy.ops.ed.undo_push(message="before retrieve")
     names = {o.name for o in bpy.data.objects}
     reports(capfd)
@@ -258,16 +264,7 @@ def test_a_photo_cut_by_the_frame_still_finds_its_model(bpy_addon, scene, tmp_pa
     from PIL import Image
 
     bpy = bpy_addon
-    lib = tmp_path / "lib"
-    lib.mkdir()
-    library(bpy, lib)
-    V, F = torus(50.0, 16.0, 40, 14)
-    me = bpy.data.meshes.new("query")
-    me.from_pydata(V.tolist(), [], F.tolist())
-    q = bpy.data.objects.new("query", me)
-    bpy.context.scene.collection.objects.link(q)
-    whole = render_object(bpy, q, tmp_path / "whole.png", direction=(0.2, -0.5, 1.0))
-    bpy.data.objects.remove(q)
+    lib, whole = library_and_ring_photo(bpy, tmp_path, "whole.png")
     rgb = np.asarray(Image.open(whole).convert("RGB"))
     obj = (np.abs(rgb.astype(int) - rgb[0, 0].astype(int)).max(axis=2) > 30)
     cols = np.cumsum(obj.sum(axis=0))
