@@ -31,6 +31,7 @@ from .topology import MeshTopology, check_mesh
 __all__ = [
     "CutResult",
     "boundary_loops",
+    "edge_paths",
     "loop_length",
     "surface_type",
     "split_along_edges",
@@ -460,3 +461,37 @@ class _Cutter:
         else:
             desc = "already a disk: no cut needed"
         return "; ".join(notes + [desc]) if notes else desc
+
+
+def edge_paths(edges) -> list[list[int]]:
+    """Split an undirected graph of edges [(a, b), ...] into simple vertex paths: breaks at
+    vertices of degree != 2; a cycle is opened at its smallest vertex (first == last then)."""
+    adj: dict[int, list[int]] = {}
+    for a, b in edges:
+        adj.setdefault(a, []).append(b)
+        adj.setdefault(b, []).append(a)
+    used: set = set()
+    out = []
+
+    def walk(start, nxt):
+        path, prev, cur = [start, nxt], start, nxt
+        used.add(frozenset((start, nxt)))
+        while len(adj[cur]) == 2 and cur != start:
+            step = adj[cur][0] if adj[cur][0] != prev else adj[cur][1]
+            if frozenset((cur, step)) in used:
+                break
+            used.add(frozenset((cur, step)))
+            path.append(step)
+            prev, cur = cur, step
+        return path
+
+    for v in sorted(adj):
+        if len(adj[v]) != 2:
+            for w in sorted(adj[v]):
+                if frozenset((v, w)) not in used:
+                    out.append(walk(v, w))
+    for v in sorted(adj):  # what is left: cycles
+        for w in sorted(adj[v]):
+            if frozenset((v, w)) not in used:
+                out.append(walk(v, w))
+    return out

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import BolusError
+from ..mesh.boundary import edge_paths
 from ..unfold.overlap import as_pattern_arrays
 
 __all__ = ["Seam", "DartMark", "PatternMarks", "pattern_marks"]
@@ -85,40 +86,6 @@ def _boundary_edges(F: np.ndarray):
     _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
     once = cnt[inv.ravel()] == 1
     return E[once], tri[once]
-
-
-def _paths(edges: list[tuple[int, int]]) -> list[list[int]]:
-    """Split an undirected graph of source edges into simple vertex paths: breaks at vertices
-    of degree != 2; a cycle is opened at its smallest vertex (first == last then)."""
-    adj: dict[int, list[int]] = {}
-    for a, b in edges:
-        adj.setdefault(a, []).append(b)
-        adj.setdefault(b, []).append(a)
-    used: set = set()
-    out = []
-
-    def walk(start, nxt):
-        path, prev, cur = [start, nxt], start, nxt
-        used.add(frozenset((start, nxt)))
-        while len(adj[cur]) == 2 and cur != start:
-            step = adj[cur][0] if adj[cur][0] != prev else adj[cur][1]
-            if frozenset((cur, step)) in used:
-                break
-            used.add(frozenset((cur, step)))
-            path.append(step)
-            prev, cur = cur, step
-        return path
-
-    for v in sorted(adj):
-        if len(adj[v]) != 2:
-            for w in sorted(adj[v]):
-                if frozenset((v, w)) not in used:
-                    out.append(walk(v, w))
-    for v in sorted(adj):  # what is left: cycles
-        for w in sorted(adj[v]):
-            if frozenset((v, w)) not in used:
-                out.append(walk(v, w))
-    return out
 
 
 def _turns(P: np.ndarray) -> np.ndarray:
@@ -271,7 +238,7 @@ def pattern_marks(UV, F, piece, source_vertex) -> PatternMarks:
     third = F[tri].sum(axis=1) - E.sum(axis=1)
     seams_raw, darts = [], []
     for (pa, pb), edges in sorted(_shared_edges(E, tri, piece, sv).items()):
-        for path in _paths(list(edges)):
+        for path in edge_paths(list(edges)):
             src_edges = [tuple(sorted((path[q], path[q + 1]))) for q in range(len(path) - 1)]
             pairs = [list(edges[k]) for k in src_edges]
             for r0, r1 in _connected_runs(E, sv, path, pairs, pa == pb):

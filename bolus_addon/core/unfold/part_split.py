@@ -11,8 +11,8 @@ spectral clustering, borders along the salient lines), into about
 
 parts, and each part then gets darts and splits as a patch would.  A part that still misses the
 target is cut in `RESPLIT_PARTS` again (up to `RESPLIT_DEPTH` times, while it has at least
-`RESPLIT_MIN_TRIANGLES` and the cut leaves no sliver); a part still missing is reported by name
-with its figures, as any piece that misses.  The borders between parts are recorded as splits (excess 0), so the
+`RESPLIT_MIN_TRIANGLES` and the cut leaves no sliver; a cut that makes its worst piece no better
+is undone); a part still missing is reported by name with its figures, as any piece that misses.  The borders between parts are recorded as splits (excess 0), so the
 pattern numbers them as seams like any other cut.
 
 Measured (nefertiti's face, 43,196 triangles, 113.7 rad; the ICT face with its nostrils, 13,120;
@@ -28,8 +28,9 @@ import re
 import numpy as np
 
 from ..analysis import saliency, spectral
+from ..mesh.boundary import edge_paths
 from ..mesh.topology import MeshTopology
-from .sheet_records import Dart, SheetPieces, Split
+from .sheet_records import EA_PER_EL, Dart, SheetPieces, Split
 from .unfold import labelled_patches
 
 __all__ = ["PART_MIN_TRIANGLES", "VARPI_PER_PART", "RESPLIT_PARTS", "RESPLIT_DEPTH", "RESPLIT_MIN_TRIANGLES",
@@ -90,36 +91,8 @@ def border_paths(V, F, labels) -> list[tuple[int, int, np.ndarray]]:
     pairs = np.unique(np.c_[np.minimum(la, lb), np.maximum(la, lb)][on], axis=0)
     for a, b in pairs:
         E = topo.edges[on & (np.minimum(la, lb) == a) & (np.maximum(la, lb) == b)]
-        out += [(int(a), int(b), p) for p in _chains(E)]
+        out += [(int(a), int(b), np.asarray(p, dtype=np.int64)) for p in edge_paths(E.tolist())]
     return out
-
-
-def _chains(E: np.ndarray) -> list[np.ndarray]:
-    """Edges (e,2) cut into vertex paths at vertices of degree != 2 (loops stay whole)."""
-    nbr: dict[int, list[int]] = {}
-    for i, j in E.tolist():
-        nbr.setdefault(i, []).append(j)
-        nbr.setdefault(j, []).append(i)
-    used: set[tuple[int, int]] = set()
-    paths = []
-    starts = [v for v, n in nbr.items() if len(n) != 2] + list(nbr)
-    for s in starts:
-        for t in nbr[s]:
-            if (min(s, t), max(s, t)) in used:
-                continue
-            path, prev, cur = [s], s, t
-            used.add((min(s, t), max(s, t)))
-            while True:
-                path.append(cur)
-                if len(nbr[cur]) != 2 or cur == s:
-                    break
-                nxt = nbr[cur][0] if nbr[cur][0] != prev else nbr[cur][1]
-                if (min(cur, nxt), max(cur, nxt)) in used:
-                    break
-                used.add((min(cur, nxt), max(cur, nxt)))
-                prev, cur = cur, nxt
-            paths.append(np.asarray(path, dtype=np.int64))
-    return paths
 
 
 def solve_in_parts(V, F, labels, solve, sigma_mm: float, groups=None, progress=None, depth: int = 0):
@@ -138,12 +111,19 @@ def solve_in_parts(V, F, labels, solve, sigma_mm: float, groups=None, progress=N
         again = None
         if not res.met and depth < RESPLIT_DEPTH and len(faces) >= RESPLIT_MIN_TRIANGLES:
             again = part_labels(Vp, F_local, RESPLIT_PARTS, sigma_mm, face_groups=g)
-        if again is None:
+        found = [] if again is None else solve_in_parts(Vp, F_local, again, solve, sigma_mm, g,
+                                                         _share(sub, 0.5, 1.0), depth + 1)
+        if found and (all(r.met for _f, _v, r in found) or _worst([r for _f, _v, r in found]) < _worst([res])):
+            out += [(faces[f2], verts[v2], r2) for f2, v2, r2 in found]
+        else:  # not cut again, or the cut made it no better: the part as it was
             out.append((faces, verts, res))
-            continue
-        for f2, v2, r2 in solve_in_parts(Vp, F_local, again, solve, sigma_mm, g, _share(sub, 0.5, 1.0), depth + 1):
-            out.append((faces[f2], verts[v2], r2))
     return out
+
+
+def _worst(results) -> float:
+    """The worst piece of `SheetPieces` results: max(EL, EA / EA_PER_EL), plus 1 if folded or overlapping."""
+    return max(max(u.EL, u.EA / EA_PER_EL) + (1.0 if u.flipped or u.overlaps else 0.0)
+               for r in results for u in r.unfoldings)
 
 
 def _share(progress, lo: float, hi: float):

@@ -164,3 +164,26 @@ def test_merged_parts_name_a_piece_that_misses_by_its_number_in_the_patch():
     assert len(res.splits) == 1 and res.splits[0].excess == 0.0  # the one border between the parts
     a, b = sorted(res.splits[0].pieces)
     assert a in (0, 1) and b in (2, 3)
+
+
+@pytest.mark.parametrize("sub_el, kept_cut", [(0.05, False), (0.01, True)])
+def test_a_cut_that_makes_a_part_no_better_is_undone(monkeypatch, sub_el, kept_cut):
+    """A part that misses (EL 3 %) is cut again; the cut is kept only when its pieces are better."""
+    from types import SimpleNamespace
+
+    from bolus_addon.core.unfold.sheet_records import SheetPieces
+
+    V, F = height_field(lambda x, y: 0.0 * x, nx=12, ny=12)
+    labels = (V[F].mean(axis=1)[:, 0] > 0).astype(int)
+    top = {int(np.count_nonzero(labels == k)) for k in (0, 1)}
+
+    def solve(Vp, Fp, gp, pr):
+        el = 0.03 if len(Fp) in top else sub_el
+        u = SimpleNamespace(EL=el, EA=el, flipped=0, overlaps=0, vert_origin=np.arange(len(Vp)))
+        return SheetPieces(np.zeros(len(Fp), dtype=np.int64), [u], [], [], el <= 0.02, "" if el <= 0.02 else "x", 0.0)
+
+    monkeypatch.setattr(part_split, "RESPLIT_DEPTH", 1)
+    found = part_split.solve_in_parts(V, F, labels, solve, 3.0)
+    assert (len(found) > 2) == kept_cut
+    faces = np.sort(np.concatenate([f for f, _v, _r in found]))
+    np.testing.assert_array_equal(faces, np.arange(len(F)))  # every triangle in exactly one part
