@@ -77,12 +77,13 @@ def part_labels(V, F, parts: int | None, sigma_mm: float, rng=0, face_groups=Non
     return seg.face_labels
 
 
-def border_paths(V, F, labels) -> list[tuple[int, int, np.ndarray]]:
+def border_paths(V, F, labels, topo: MeshTopology | None = None) -> list[tuple[int, int, np.ndarray]]:
     """The borders between labelled parts as vertex paths: [(label a, label b, path (k,) into V)].
 
     Every edge between triangles of labels a < b belongs to exactly one path; a path runs
-    between two ends (on the patch outline or where three parts meet) or closes on itself."""
-    topo = MeshTopology(V, F)
+    between two ends (on the patch outline or where three parts meet) or closes on itself.
+    topo: the `MeshTopology` of (V, F) if the caller has it."""
+    topo = MeshTopology(V, F) if topo is None else topo
     ef = topo.edge_faces
     inner = (ef >= 0).all(axis=1)
     la, lb = labels[np.maximum(ef[:, 0], 0)], labels[np.maximum(ef[:, 1], 0)]
@@ -154,7 +155,7 @@ def merge_parts(V, F, parts, seconds: float) -> SheetPieces:
     topo = MeshTopology(V, F)
     n = topo.n
     keys = topo.edges[:, 0] * n + topo.edges[:, 1]
-    for _a, _b, path in border_paths(V, F, part):
+    for _a, _b, path in border_paths(V, F, part, topo):
         e = int(np.searchsorted(keys, min(path[0], path[1]) * n + max(path[0], path[1])))
         fa, fb = topo.edge_faces[e]
         splits.append(Split((int(piece[fa]), int(piece[fb])), path, 0.0))
